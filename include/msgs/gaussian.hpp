@@ -1,0 +1,105 @@
+// include/msgs/gaussian.hpp
+// Gaussian<Bands, SHDeg>: the compile-time description of one splat, its traits, and the
+// structure-of-arrays model container. Every compile-time size in msgs comes from here.
+#pragma once
+
+#include <cstddef>
+#include <stdexcept>
+#include <type_traits>
+#include <string>
+#include <vector>
+
+namespace msgs {
+
+/// Compile-time description of a Gaussian primitive with `Bands` colour channels and spherical
+/// harmonics up to degree `SHDeg`. A Separate RGB model is `Gaussian<3, 3>`, a single narrow band
+/// `Gaussian<1, 3>`, a Joint model `Gaussian<7, 3>`.
+template <int Bands, int SHDeg>
+struct Gaussian {
+  static_assert(Bands >= 1, "a Gaussian needs at least one colour channel");
+  static_assert(SHDeg >= 0 && SHDeg <= 3, "spherical harmonics degree must be 0..3");
+  /// Number of colour channels carried by each Gaussian.
+  static constexpr int bands = Bands;
+  /// Highest spherical-harmonics degree.
+  static constexpr int sh_degree = SHDeg;
+  /// SH coefficients per channel: (SHDeg + 1)^2.
+  static constexpr int sh_coeffs = (SHDeg + 1) * (SHDeg + 1);
+  /// Floats of SH per Gaussian: coefficients x channels.
+  static constexpr int sh_floats = sh_coeffs * Bands;
+  /// Scalars per Gaussian: mean 3, log-scale 3, quaternion 4, opacity logit 1, SH.
+  static constexpr int params = 3 + 3 + 4 + 1 + sh_floats;
+};
+
+/// Number of SH coefficients per channel for degree `deg` (runtime or compile time).
+constexpr int sh_coeffs_for_degree(int deg) { return (deg + 1) * (deg + 1); }
+
+/// Colour channels of a Gaussian type.
+template <class G> inline constexpr int bands_v = G::bands;
+/// SH degree of a Gaussian type.
+template <class G> inline constexpr int sh_degree_v = G::sh_degree;
+/// SH coefficients per channel of a Gaussian type.
+template <class G> inline constexpr int sh_coeffs_v = G::sh_coeffs;
+
+/// Trait: is `T` an instantiation of `Gaussian`?
+template <class T> struct is_gaussian : std::false_type {};
+template <int B, int D> struct is_gaussian<Gaussian<B, D>> : std::true_type {};
+template <class T> inline constexpr bool is_gaussian_v = is_gaussian<T>::value;
+
+/// N Gaussians of type `G` as structure of arrays, scalar type `S` (float for training, double
+/// for gradient checks). Storage conventions follow 3DGS: log-scales, wxyz quaternions (not
+/// necessarily normalised), opacity logits, SH coefficients laid out [N, K, Bands] so that the
+/// channels of one coefficient are adjacent.
+template <class G, class S = float>
+struct GaussianModel {
+  static_assert(is_gaussian_v<G>, "GaussianModel<G>: G must be msgs::Gaussian<Bands, SHDeg>");
+  using gaussian_type = G;
+  using scalar_type = S;
+  static constexpr int bands = G::bands;
+  static constexpr int sh_coeffs = G::sh_coeffs;
+
+  std::vector<S> means;           ///< [N, 3] world position
+  std::vector<S> log_scales;      ///< [N, 3] log of the standard deviations along the local axes
+  std::vector<S> quats;           ///< [N, 4] rotation quaternion w, x, y, z
+  std::vector<S> opacity_logits;  ///< [N]    logit of the opacity
+  std::vector<S> sh;              ///< [N, K, Bands] SH coefficients, K = sh_coeffs
+
+  GaussianModel() = default;
+  explicit GaussianModel(std::size_t n) { resize(n); }
+
+  /// Number of Gaussians.
+  std::size_t size() const { return opacity_logits.size(); }
+  bool empty() const { return opacity_logits.empty(); }
+
+  /// Resize every array to hold `n` Gaussians (new entries are zero).
+  void resize(std::size_t n) {
+    means.resize(n * 3);
+    log_scales.resize(n * 3);
+    quats.resize(n * 4);
+    opacity_logits.resize(n);
+    sh.resize(n * static_cast<std::size_t>(G::sh_floats));
+  }
+
+  /// Fill every array with zero (keeps the size); used for gradient buffers.
+  void set_zero() {
+    for (auto* v : {&means, &log_scales, &quats, &opacity_logits, &sh}) v->assign(v->size(), S(0));
+  }
+
+  /// SH coefficient k of channel c of Gaussian i.
+  S& sh_at(std::size_t i, int k, int c) {
+    return sh[(i * G::sh_coeffs + static_cast<std::size_t>(k)) * G::bands + static_cast<std::size_t>(c)];
+  }
+  const S& sh_at(std::size_t i, int k, int c) const {
+    return sh[(i * G::sh_coeffs + static_cast<std::size_t>(k)) * G::bands + static_cast<std::size_t>(c)];
+  }
+
+  /// Throw std::invalid_argument if the arrays disagree on N (a model assembled by hand).
+  void check_consistent() const {
+    const std::size_t n = size();
+    if (means.size() != 3 * n || log_scales.size() != 3 * n || quats.size() != 4 * n ||
+        sh.size() != n * static_cast<std::size_t>(G::sh_floats))
+      throw std::invalid_argument("GaussianModel: arrays disagree on the number of Gaussians (" +
+                                  std::to_string(n) + " opacities)");
+  }
+};
+
+}  // namespace msgs

@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# scripts/setup.sh: install the Debian packages msgs needs (idempotent; skips apt when all are present).
+set -euo pipefail
+pkgs=(build-essential cmake pkg-config libeigen3-dev libglm-dev libomp-dev doctest-dev libbenchmark-dev
+      libstb-dev nlohmann-json3-dev libtiff-dev libpng-dev libnanoflann-dev gnuplot-nox)
+missing=()
+for p in "${pkgs[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if ((${#missing[@]})); then
+  echo "setup: installing ${missing[*]}"
+  SUDO=""; [ "$(id -u)" = 0 ] || SUDO=sudo
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+fi
