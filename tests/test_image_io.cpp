@@ -1,0 +1,208 @@
+// tests/test_image_io.cpp
+// Tests for include/msgs/io/image_io.hpp: PNG 8/16-bit, TIFF 8/16-bit, .npy round trips, bad files, downscale.
+#include <doctest/doctest.h>
+
+#include <cstdlib>
+#include <fstream>
+#include <random>
+
+#include "msgs/io/image_io.hpp"
+
+namespace fs = std::filesystem;
+using msgs::Image;
+using namespace msgs::io;
+
+namespace {
+
+fs::path scratch(const std::string& sub) {
+  const char* env = std::getenv("MSGS_TEST_TMP");
+  fs::path d = (env ? fs::path(env) : fs::temp_directory_path()) / "test_image_io" / sub;
+  fs::remove_all(d);
+  fs::create_directories(d);
+  return d;
+}
+
+Image<float> random_image(int w, int h, int c, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  Image<float> img(w, h, c);
+  for (auto& v : img.data) v = u(rng);
+  return img;
+}
+
+void truncate_file(const fs::path& p, double keep) {
+  const auto size = fs::file_size(p);
+  fs::resize_file(p, static_cast<std::uintmax_t>(double(size) * keep));
+}
+
+bool only_file_in(const fs::path& dir) {
+  int n = 0;
+  for (const auto& e : fs::directory_iterator(dir)) { (void)e; ++n; }
+  return n == 1;
+}
+
+}  // namespace
+
+TEST_CASE("8-bit PNG round trip quantises to 1/255 for 1, 3 and 4 channels") {
+  const auto dir = scratch("png8");
+  for (int c : {1, 3, 4}) {
+    const auto img = random_image(13, 7, c, 10u + unsigned(c));
+    const auto p = dir / cat("a", c, ".png");
+    write_png8(p, img);
+    const auto back = read_image(p);
+    REQUIRE(back.width == 13);
+    REQUIRE(back.height == 7);
+    REQUIRE(back.channels == c);
+    for (std::size_t i = 0; i < img.size(); ++i)
+      CHECK(back.data[i] == doctest::Approx(std::round(double(img.data[i]) * 255.0) / 255.0).epsilon(1e-6));
+  }
+}
+
+TEST_CASE("16-bit PNG keeps 16 bits") {
+  const auto dir = scratch("png16");
+  const auto img = random_image(9, 11, 1, 3);
+  const auto p = dir / "a.png";
+  write_png16(p, img);
+  const auto back = read_image(p);
+  REQUIRE(back.channels == 1);
+  double max_err = 0;
+  for (std::size_t i = 0; i < img.size(); ++i) max_err = std::max(max_err, double(std::abs(back.data[i] - img.data[i])));
+  CHECK(max_err <= 0.5 / 65535.0 + 1e-7);
+  CHECK(max_err > 0);  // it is quantised, not bit-exact floats
+}
+
+TEST_CASE("16-bit TIFF round trip, 1 and 3 channels") {
+  const auto dir = scratch("tiff16");
+  for (int c : {1, 3, 4}) {
+    const auto img = random_image(17, 5, c, 7u + unsigned(c));
+    const auto p = dir / cat("a", c, ".tif");
+    write_tiff16(p, img);
+    const auto back = read_image(p);
+    REQUIRE(back.width == 17);
+    REQUIRE(back.height == 5);
+    REQUIRE(back.channels == c);
+    for (std::size_t i = 0; i < img.size(); ++i)
+      CHECK(back.data[i] == doctest::Approx(std::round(double(img.data[i]) * 65535.0) / 65535.0).epsilon(1e-7));
+  }
+}
+
+TEST_CASE("8-bit TIFF written with libtiff directly reads as value / 255") {
+  const auto dir = scratch("tiff8");
+  const auto p = dir / "a.tif";
+  TIFF* tif = TIFFOpen(p.c_str(), "w");
+  REQUIRE(tif);
+  TIFFSetField(tif, TIFFTAG_IMAGEWIDTH, 4u);
+  TIFFSetField(tif, TIFFTAG_IMAGELENGTH, 2u);
+  TIFFSetField(tif, TIFFTAG_BITSPERSAMPLE, 8);
+  TIFFSetField(tif, TIFFTAG_SAMPLESPERPIXEL, 1);
+  TIFFSetField(tif, TIFFTAG_PHOTOMETRIC, PHOTOMETRIC_MINISBLACK);
+  TIFFSetField(tif, TIFFTAG_PLANARCONFIG, PLANARCONFIG_CONTIG);
+  unsigned char rows[2][4] = {{0, 51, 102, 255}, {1, 2, 3, 4}};
+  for (unsigned y = 0; y < 2; ++y) REQUIRE(TIFFWriteScanline(tif, rows[y], y, 0) >= 0);
+  TIFFClose(tif);
+  const auto img = read_image(p);
+  REQUIRE(img.channels == 1);
+  CHECK(img.at(1, 0, 0) == doctest::Approx(0.2f));
+  CHECK(img.at(3, 0, 0) == doctest::Approx(1.0f));
+  CHECK(img.at(3, 1, 0) == doctest::Approx(4.0f / 255.0f));
+}
+
+TEST_CASE("npy round trip is exact and has the NumPy header") {
+  const auto dir = scratch("npy");
+  auto img = random_image(5, 3, 2, 1);
+  img.data[0] = -3.5f;  // npy stores values as they are
+  const auto p = dir / "a.npy";
+  write_npy(p, img);
+  const auto bytes = read_bytes(p);
+  const std::string head(bytes.begin(), bytes.begin() + 128);
+  CHECK(head.find("'shape': (3, 5, 2)") != std::string::npos);
+  const std::size_t hlen = std::size_t(bytes[8]) | (std::size_t(bytes[9]) << 8);
+  CHECK((10 + hlen) % 64 == 0);
+  CHECK(bytes.size() == 10 + hlen + img.size() * 4);
+  const auto back = read_npy(p);
+  CHECK(back.width == 5);
+  CHECK(back.height == 3);
+  CHECK(back.data == img.data);
+}
+
+TEST_CASE("writers replace the target atomically and leave no temporary behind") {
+  const auto dir = scratch("atomic");
+  const auto p = dir / "a.png";
+  write_png8(p, random_image(4, 4, 3, 2));
+  write_png8(p, random_image(6, 6, 3, 3));
+  CHECK(read_image(p).width == 6);
+  CHECK(only_file_in(dir));
+  // A failing write leaves the old file untouched.
+  Image<float> bad(2, 2, 1);
+  bad.data[1] = std::nanf("");
+  CHECK_THROWS_AS(write_png8(p, bad), IoError);
+  CHECK(read_image(p).width == 6);
+  CHECK(only_file_in(dir));
+  CHECK_THROWS_AS(write_png8(dir / "missing_dir" / "x.png", bad), IoError);
+}
+
+TEST_CASE("writers clamp to [0, 1]") {
+  const auto dir = scratch("clamp");
+  Image<float> img(2, 1, 1);
+  img.data = {-0.5f, 7.0f};
+  write_png8(dir / "a.png", img);
+  const auto back = read_image(dir / "a.png");
+  CHECK(back.data[0] == 0.0f);
+  CHECK(back.data[1] == 1.0f);
+}
+
+TEST_CASE("bad image files are refused with the file name in the message") {
+  const auto dir = scratch("bad");
+  auto expect_error = [](const fs::path& p, const std::string& needle) {
+    try {
+      (void)read_image(p);
+      FAIL("no exception for " << p);
+    } catch (const IoError& e) {
+      const std::string msg = e.what();
+      CHECK(msg.find(p.filename().string()) != std::string::npos);
+      CHECK_MESSAGE(msg.find(needle) != std::string::npos, msg);
+    }
+  };
+  expect_error(dir / "missing.png", "does not exist");
+
+  write_png16(dir / "t.png", random_image(64, 64, 3, 5));
+  truncate_file(dir / "t.png", 0.5);
+  expect_error(dir / "t.png", "truncated");
+
+  write_tiff16(dir / "t.tif", random_image(64, 64, 1, 5));
+  truncate_file(dir / "t.tif", 0.3);
+  expect_error(dir / "t.tif", "t.tif");
+
+  {
+    std::ofstream f(dir / "junk.jpg", std::ios::binary);
+    f << "this is not an image at all";
+  }
+  expect_error(dir / "junk.jpg", "cannot decode");
+
+  // 32-bit unsigned TIFF: unsupported bit depth.
+  TIFF* tif = TIFFOpen((dir / "u32.tif").c_str(), "w");
+  REQUIRE(tif);
+  TIFFSetField(tif, TIFFTAG_IMAGEWIDTH, 2u);
+  TIFFSetField(tif, TIFFTAG_IMAGELENGTH, 1u);
+  TIFFSetField(tif, TIFFTAG_BITSPERSAMPLE, 32);
+  TIFFSetField(tif, TIFFTAG_SAMPLESPERPIXEL, 1);
+  TIFFSetField(tif, TIFFTAG_PHOTOMETRIC, PHOTOMETRIC_MINISBLACK);
+  std::uint32_t row[2] = {1, 2};
+  REQUIRE(TIFFWriteScanline(tif, row, 0, 0) >= 0);
+  TIFFClose(tif);
+  expect_error(dir / "u32.tif", "32-bit");
+}
+
+TEST_CASE("downscale: box filter with ceil size") {
+  Image<float> img(5, 3, 1);
+  for (int y = 0; y < 3; ++y)
+    for (int x = 0; x < 5; ++x) img.at(x, y, 0) = float(y * 5 + x);
+  const auto d = downscale(img, 2);
+  REQUIRE(d.width == 3);
+  REQUIRE(d.height == 2);
+  CHECK(d.at(0, 0, 0) == doctest::Approx((0 + 1 + 5 + 6) / 4.0));
+  CHECK(d.at(2, 0, 0) == doctest::Approx((4 + 9) / 2.0));
+  CHECK(d.at(1, 1, 0) == doctest::Approx((12 + 13) / 2.0));
+  CHECK(d.at(2, 1, 0) == doctest::Approx(14.0));
+  CHECK(downscale(img, 1).data == img.data);
+}
