@@ -1,0 +1,356 @@
+// include/msgs/rasterize.hpp
+// The differentiable rasteriser: project -> bin/sort -> blend, and the analytic backward in
+// reverse. Exact (no 3-sigma cut-off), deterministic for any OpenMP thread count, any band count
+// and band subset; optional features (depth, antialiasing) are compile-time and cost nothing off.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "bin.hpp"
+#include "blend.hpp"
+#include "camera.hpp"
+#include "gaussian.hpp"
+#include "image.hpp"
+#include "project.hpp"
+
+namespace msgs {
+
+/// Compile-time rasteriser features. `depth`: also output the accumulated depth sum_i w_i z_i.
+/// `antialiased`: gsplat's antialiased mode (opacity times sqrt(det cov2d / det(cov2d + 0.3 I))).
+struct RasterOptions {
+  bool depth = false;
+  bool antialiased = false;
+};
+
+/// Run-time settings of one render.
+template <class S>
+struct RenderSettings {
+  int band_first = 0;         ///< first model channel rendered
+  int band_count = -1;        ///< channels rendered; -1 = every channel from band_first on
+  int sh_degree = -1;         ///< active SH degree (<= the model's); -1 = the model's
+  std::vector<S> background;  ///< empty = 0, one value = broadcast, or band_count values
+};
+
+/// Gradients produced by Rasterizer::backward.
+template <class G, class S>
+struct Gradients {
+  GaussianModel<G, S> model;  ///< dL/d parameters; SH of channels outside the rendered range untouched
+  std::vector<S> mean2d;      ///< [N, 2] dL/d(projected mean, pixels)
+  std::vector<S> absgrad;     ///< [N, 2] sum over pixels of |per-pixel dL/d(mean2d)|, per component
+  std::vector<S> background;  ///< [band_count] dL/d(background)
+};
+
+/// Tile rasteriser for models of Gaussian type `G` in scalar `S`. Holds the buffers of the last
+/// forward so that backward can reuse them and repeated renders do not allocate.
+template <class G, class S = float, RasterOptions Opt = RasterOptions{}>
+class Rasterizer {
+ public:
+  using Model = GaussianModel<G, S>;
+  static constexpr int kBands = G::bands;
+
+  /// Render `model` from `cam`. Returns the image [H, W, band_count].
+  const Image<S>& forward(const Model& model, const Camera<S>& cam, const RenderSettings<S>& settings = {}) {
+    prepare(model, cam, settings);
+    project_all(model);
+    bin_gaussians(visible_, depth_.data(), rects_.data(), grid_, bins_);
+    blend_all();
+    model_ = &model;
+    has_forward_ = true;
+    return image_;
+  }
+
+  /// Backward of the last forward. `d_image` [H, W, band_count]; `d_alpha`, `d_depth` [H, W, 1]
+  /// or nullptr. The model passed to forward must still be alive and unchanged.
+  void backward(const Image<S>& d_image, const Image<S>* d_alpha, const Image<S>* d_depth, Gradients<G, S>& grads) {
+    if (!has_forward_) throw std::logic_error("Rasterizer::backward: no forward pass to differentiate");
+    check_grad_image(d_image, count_, "d_image");
+    if (d_alpha) check_grad_image(*d_alpha, 1, "d_alpha");
+    if (d_depth) {
+      if constexpr (!Opt.depth) throw std::invalid_argument("Rasterizer::backward: d_depth given but depth is off");
+      check_grad_image(*d_depth, 1, "d_depth");
+    }
+    const Model& model = *model_;
+    const std::size_t N = model.size();
+    if (grads.model.size() != N) grads.model.resize(N);
+    zero_grads(grads);
+
+    // Blend backward: one gradient record per intersection, per-tile background partials.
+    const int R = BlendRecord::size(count_);
+    records_.resize(bins_.pairs() * std::uint64_t(R));
+    bg_partial_.assign(std::size_t(grid_.count()) * std::size_t(count_), S(0));
+    BlendGradInputs<S> gin;
+    gin.d_image = d_image.data.data();
+    gin.d_alpha = d_alpha ? d_alpha->data.data() : nullptr;
+    if constexpr (Opt.depth) gin.d_depth = d_depth ? d_depth->data.data() : nullptr;
+    dispatch_channels([&]<int C>() {
+      const BlendInputs<S> in = blend_inputs();
+      const int tiles = grid_.count();
+#pragma omp parallel for schedule(dynamic, 2)
+      for (int t = 0; t < tiles; ++t)
+        blend_tile_bwd<S, C, kBands, Opt.depth>(in, t, transmittance_.data(), last_.data(), gin, records_.data(),
+                                                 bg_partial_.data() + std::size_t(t) * std::size_t(count_));
+    });
+    grads.background.assign(std::size_t(count_), S(0));
+    for (int t = 0; t < grid_.count(); ++t)
+      for (int ch = 0; ch < count_; ++ch) grads.background[std::size_t(ch)] += bg_partial_[std::size_t(t) * std::size_t(count_) + std::size_t(ch)];
+    if (bg_broadcast_) {  // one background value was broadcast over the channels
+      S sum = S(0);
+      for (S v : grads.background) sum += v;
+      grads.background.assign(1, sum);
+    }
+
+    // Per-Gaussian reduction in a fixed (tile) order, then projection and colour backward.
+    const std::int64_t V = std::int64_t(bins_.order.size());
+    const ProjectCamera& pcam = pcam_;
+    const int first = first_, count = count_, deg = sh_degree_;
+#pragma omp parallel for schedule(dynamic, 256)
+    for (std::int64_t s = 0; s < V; ++s) {
+      const std::uint32_t g = bins_.order[std::size_t(s)];
+      double acc[BlendRecord::kBase + kBands] = {};
+      for (std::uint64_t m = bins_.pair_offset[std::size_t(s)]; m < bins_.pair_offset[std::size_t(s) + 1]; ++m) {
+        const S* rec = records_.data() + bins_.pair_slot[m] * std::uint64_t(R);
+        for (int l = 0; l < R; ++l) acc[l] += double(rec[l]);
+      }
+      ProjectedGrad pg;
+      pg.mean2d[0] = acc[BlendRecord::kMeanX];
+      pg.mean2d[1] = acc[BlendRecord::kMeanY];
+      pg.conic[0] = acc[BlendRecord::kConicA];
+      pg.conic[1] = acc[BlendRecord::kConicB];
+      pg.conic[2] = acc[BlendRecord::kConicC];
+      pg.opacity = acc[BlendRecord::kOpacity];
+      pg.depth = Opt.depth ? acc[BlendRecord::kDepth] : 0.0;
+      grads.mean2d[2 * g] = S(pg.mean2d[0]);
+      grads.mean2d[2 * g + 1] = S(pg.mean2d[1]);
+      grads.absgrad[2 * g] = S(acc[BlendRecord::kAbsX]);
+      grads.absgrad[2 * g + 1] = S(acc[BlendRecord::kAbsY]);
+
+      const GaussianGeometry geo = geometry(model, g);
+      GeometryGrad gg;
+      project_bwd<Opt.antialiased>(geo, pcam, pg, gg);
+      colour_bwd(model.sh.data() + std::size_t(g) * G::sh_floats, kBands, first, count, deg, geo.mean - pcam.position,
+                 acc + BlendRecord::kBase, grads.model.sh.data() + std::size_t(g) * G::sh_floats, gg.mean);
+      for (int i = 0; i < 3; ++i) {
+        grads.model.means[3 * g + i] = S(gg.mean[i]);
+        grads.model.log_scales[3 * g + i] = S(gg.log_scale[i]);
+      }
+      for (int i = 0; i < 4; ++i) grads.model.quats[4 * g + i] = S(gg.quat[i]);
+      grads.model.opacity_logits[g] = S(gg.opacity_logit);
+    }
+  }
+
+  const Image<S>& image() const { return image_; }   ///< [H, W, band_count]
+  const Image<S>& alpha() const { return alpha_; }   ///< [H, W, 1]: 1 - final transmittance
+  /// [H, W, 1]: sum_i w_i z_i (not normalised by alpha). Only with RasterOptions::depth.
+  const Image<S>& depth() const {
+    static_assert(Opt.depth, "Rasterizer::depth() needs RasterOptions{.depth = true}");
+    return depth_image_;
+  }
+  /// [N, 2] screen half-extent in pixels along x and y; {0, 0} for culled Gaussians.
+  const std::vector<std::int32_t>& radii() const { return radii_; }
+  /// Blended pixel-Gaussian pairs in the last forward.
+  std::uint64_t fragments() const { return fragments_; }
+  /// Gaussian-tile pairs in the last forward.
+  std::uint64_t intersections() const { return bins_.pairs(); }
+  /// Number of Gaussians that survived culling in the last forward.
+  std::size_t visible_count() const { return visible_.size(); }
+  /// The tile lists of the last forward.
+  const Binning& binning() const { return bins_; }
+  /// Channels rendered by the last forward.
+  int band_first() const { return first_; }
+  int band_count() const { return count_; }
+
+ private:
+  void check_grad_image(const Image<S>& img, int channels, const char* name) const {
+    if (img.width != grid_.width || img.height != grid_.height)
+      throw std::invalid_argument(std::string("Rasterizer::backward: ") + name + " is " + std::to_string(img.width) +
+                                  "x" + std::to_string(img.height) + ", the render was " + std::to_string(grid_.width) +
+                                  "x" + std::to_string(grid_.height));
+    check_grad_image_shape(img, channels, name);
+  }
+  static void check_grad_image_shape(const Image<S>& img, int channels, const char* name) {
+    if (img.channels != channels || img.data.size() != img.pixels() * std::size_t(channels))
+      throw std::invalid_argument(std::string("Rasterizer::backward: ") + name + " must have " +
+                                  std::to_string(channels) + " channel(s)");
+  }
+
+  static GaussianGeometry geometry(const Model& m, std::size_t i) {
+    GaussianGeometry g;
+    g.mean = Eigen::Vector3d(double(m.means[3 * i]), double(m.means[3 * i + 1]), double(m.means[3 * i + 2]));
+    g.log_scale = Eigen::Vector3d(double(m.log_scales[3 * i]), double(m.log_scales[3 * i + 1]), double(m.log_scales[3 * i + 2]));
+    g.quat = Eigen::Vector4d(double(m.quats[4 * i]), double(m.quats[4 * i + 1]), double(m.quats[4 * i + 2]), double(m.quats[4 * i + 3]));
+    g.opacity_logit = double(m.opacity_logits[i]);
+    return g;
+  }
+
+  void prepare(const Model& model, const Camera<S>& cam, const RenderSettings<S>& st) {
+    model.check_consistent();
+    cam.validate();
+    first_ = st.band_first;
+    count_ = st.band_count < 0 ? kBands - st.band_first : st.band_count;
+    if (first_ < 0 || first_ >= kBands || count_ < 1 || first_ + count_ > kBands)
+      throw std::invalid_argument("RenderSettings: band range [" + std::to_string(first_) + ", " +
+                                  std::to_string(first_ + count_) + ") is outside the model's " +
+                                  std::to_string(kBands) + " channel(s)");
+    sh_degree_ = st.sh_degree < 0 ? G::sh_degree : st.sh_degree;
+    if (sh_degree_ > G::sh_degree)
+      throw std::invalid_argument("RenderSettings: sh_degree " + std::to_string(st.sh_degree) + " exceeds the model's " +
+                                  std::to_string(G::sh_degree));
+    bg_broadcast_ = st.background.size() == 1 && count_ > 1;
+    if (st.background.empty()) background_.assign(std::size_t(count_), S(0));
+    else if (st.background.size() == 1) background_.assign(std::size_t(count_), st.background[0]);
+    else if (st.background.size() == std::size_t(count_)) background_ = st.background;
+    else
+      throw std::invalid_argument("RenderSettings: background has " + std::to_string(st.background.size()) +
+                                  " values; expected 0, 1 or " + std::to_string(count_));
+    for (S v : background_)
+      if (!std::isfinite(double(v))) throw std::invalid_argument("RenderSettings: background must be finite");
+    pcam_ = ProjectCamera::from(cam);
+    grid_ = TileGrid(cam.width, cam.height);
+    const std::size_t N = model.size();
+    splats_.resize(N);
+    colours_.resize(N * std::size_t(count_));
+    depth_.resize(N);
+    rects_.assign(N, PixelRect{});
+    radii_.assign(2 * N, 0);
+    visible_flag_.assign(N, 0);
+  }
+
+  void project_all(const Model& model) {
+    const std::int64_t N = std::int64_t(model.size());
+    const int first = first_, count = count_, deg = sh_degree_;
+    const int K = sh_coeffs_for_degree(deg);
+#pragma omp parallel for schedule(dynamic, 1024)
+    for (std::int64_t i = 0; i < N; ++i) {
+      const GaussianGeometry geo = geometry(model, std::size_t(i));
+      ProjectedGaussian pg;
+      if (!project_fwd<Opt.antialiased>(geo, pcam_, pg)) continue;
+      const S* sh = model.sh.data() + std::size_t(i) * G::sh_floats;
+      bool finite = true;
+      for (int k = 0; k < K && finite; ++k)
+        for (int ch = 0; ch < count; ++ch) finite = finite && std::isfinite(double(sh[k * kBands + first + ch]));
+      if (!finite) continue;
+      const PixelRect rect = pixel_rect(pg.mean2d[0], pg.mean2d[1], pg.extent[0], pg.extent[1], grid_.width, grid_.height);
+      if (rect.empty()) continue;
+      double dir[3] = {0, 0, 1};
+      if constexpr (G::sh_degree > 0) {
+        if (deg > 0) {
+          const Eigen::Vector3d d = geo.mean - pcam_.position;
+          const double len = d.norm();
+          if (len > 0) { dir[0] = d[0] / len; dir[1] = d[1] / len; dir[2] = d[2] / len; }
+        }
+      }
+      double col[kBands];
+      colour_fwd(sh, kBands, first, count, deg, dir, col);
+      Splat<S>& s = splats_[std::size_t(i)];
+      s.mx = S(pg.mean2d[0]); s.my = S(pg.mean2d[1]);
+      s.a = S(pg.conic[0]); s.b = S(pg.conic[1]); s.c = S(pg.conic[2]);
+      s.o = S(pg.opacity);
+      s.z = S(pg.depth);
+      s.rect = rect;
+      depth_[std::size_t(i)] = S(pg.depth);
+      for (int ch = 0; ch < count; ++ch) colours_[std::size_t(i) * std::size_t(count) + std::size_t(ch)] = S(col[ch]);
+      rects_[std::size_t(i)] = rect;
+      radii_[2 * std::size_t(i)] = std::int32_t(std::min(std::ceil(pg.extent[0]), 1e9));
+      radii_[2 * std::size_t(i) + 1] = std::int32_t(std::min(std::ceil(pg.extent[1]), 1e9));
+      visible_flag_[std::size_t(i)] = 1;
+    }
+    visible_.clear();
+    for (std::int64_t i = 0; i < N; ++i)
+      if (visible_flag_[std::size_t(i)]) visible_.push_back(std::uint32_t(i));
+  }
+
+  BlendInputs<S> blend_inputs() const {
+    BlendInputs<S> in;
+    in.grid = &grid_;
+    in.bins = &bins_;
+    in.splats = splats_.data();
+    in.colours = colours_.data();
+    in.count = count_;
+    in.background = background_.data();
+    return in;
+  }
+
+  /// Call f.template operator()<C>() with C = count_ when it is a common compile-time channel
+  /// count (1, 3 or all bands), else C = 0 (run-time count).
+  template <class F>
+  void dispatch_channels(F&& f) {
+    if (count_ == 1) f.template operator()<1>();
+    else if (count_ == kBands) f.template operator()<kBands>();
+    else if constexpr (kBands > 3) {
+      if (count_ == 3) f.template operator()<3>();
+      else f.template operator()<0>();
+    } else {
+      f.template operator()<0>();
+    }
+  }
+
+  void blend_all() {
+    const int W = grid_.width, H = grid_.height;
+    image_.reset(W, H, count_);
+    alpha_.reset(W, H, 1);
+    if constexpr (Opt.depth) depth_image_.reset(W, H, 1);
+    transmittance_.resize(std::size_t(W) * std::size_t(H));
+    last_.resize(std::size_t(W) * std::size_t(H));
+    BlendOutputs<S> out;
+    out.image = image_.data.data();
+    out.alpha = alpha_.data.data();
+    if constexpr (Opt.depth) out.depth = depth_image_.data.data();
+    out.transmittance = transmittance_.data();
+    out.last = last_.data();
+    std::uint64_t frags = 0;
+    dispatch_channels([&]<int C>() {
+      const BlendInputs<S> in = blend_inputs();
+      const int tiles = grid_.count();
+#pragma omp parallel for schedule(dynamic, 2) reduction(+ : frags)
+      for (int t = 0; t < tiles; ++t) frags += blend_tile_fwd<S, C, kBands, Opt.depth>(in, t, out);
+    });
+    fragments_ = frags;
+  }
+
+  void zero_grads(Gradients<G, S>& grads) const {
+    const std::size_t N = model_->size();
+    auto& m = grads.model;
+    std::fill(m.means.begin(), m.means.end(), S(0));
+    std::fill(m.log_scales.begin(), m.log_scales.end(), S(0));
+    std::fill(m.quats.begin(), m.quats.end(), S(0));
+    std::fill(m.opacity_logits.begin(), m.opacity_logits.end(), S(0));
+    for (std::size_t i = 0; i < N; ++i)
+      for (int k = 0; k < G::sh_coeffs; ++k)
+        for (int ch = first_; ch < first_ + count_; ++ch) m.sh_at(i, k, ch) = S(0);
+    grads.mean2d.assign(2 * N, S(0));
+    grads.absgrad.assign(2 * N, S(0));
+  }
+
+  // Settings of the last forward.
+  int first_ = 0, count_ = 0, sh_degree_ = 0;
+  bool bg_broadcast_ = false;
+  std::vector<S> background_;          // [count]
+  ProjectCamera pcam_{};
+  TileGrid grid_;
+  const Model* model_ = nullptr;
+  bool has_forward_ = false;
+
+  // Projection results.
+  std::vector<Splat<S>> splats_;       // [N]
+  std::vector<S> colours_;             // [N, count]
+  std::vector<S> depth_;               // [N]
+  std::vector<PixelRect> rects_;       // [N]
+  std::vector<std::int32_t> radii_;    // [N, 2]
+  std::vector<std::uint8_t> visible_flag_;  // [N]
+  std::vector<std::uint32_t> visible_; // [V]
+  Binning bins_;
+
+  // Blend results.
+  Image<S> image_, alpha_, depth_image_;
+  std::vector<S> transmittance_;       // [H, W]
+  std::vector<std::uint32_t> last_;    // [H, W]
+  std::uint64_t fragments_ = 0;
+  std::vector<S> records_;             // [M, BlendRecord::size(count)]
+  std::vector<S> bg_partial_;          // [tiles, count]
+};
+
+}  // namespace msgs
