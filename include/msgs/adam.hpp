@@ -1,0 +1,209 @@
+// include/msgs/adam.hpp
+// Adam over a GaussianModel with per-group learning rates, per-group/per-channel step counters and update masks.
+#pragma once
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <stdexcept>
+#include <string>
+
+#include "msgs/gaussian.hpp"
+
+namespace msgs {
+
+/// Hyper-parameters of the Gaussian optimiser; defaults are those of the multi-spectral
+/// implementation (REFERENCE §3).
+struct AdamConfig {
+  double lr_means = 1.6e-4;          ///< position lr at step 0 (times scene_scale)
+  double lr_means_final = 1.6e-6;    ///< position lr reached at step lr_means_steps (times scene_scale)
+  std::int64_t lr_means_steps = 30000;  ///< T of the exponential decay: the length of the run
+  double scene_scale = 1.0;          ///< positions live in scene units; the position lr scales with them
+  double lr_sh_dc = 2.5e-3;          ///< SH coefficient 0 of every channel
+  double lr_sh_rest = 1.25e-4;       ///< SH coefficients 1.. of every channel
+  double lr_opacities = 0.05;
+  double lr_scales = 5e-3;
+  double lr_quats = 1e-3;
+  double beta1 = 0.9;
+  double beta2 = 0.999;
+  double eps = 1e-15;  ///< 3DGS uses 1e-15 instead of torch's 1e-8: gradients here are tiny
+};
+
+/// Which parameters one `Adam::step` updates. SH updates are restricted to the colour channels
+/// [sh_first, sh_first + sh_count) — the band that was rendered this step.
+struct AdamMask {
+  bool means = true;
+  bool scales = true;
+  bool quats = true;
+  bool opacities = true;
+  bool sh = true;
+  int sh_first = 0;   ///< first colour channel whose SH updates
+  int sh_count = -1;  ///< number of channels; -1 means all channels from sh_first on
+
+  /// Everything, all channels.
+  static AdamMask all() { return {}; }
+  /// Colour (SH) of channels [first, first + count) only; geometry and opacity frozen.
+  static AdamMask colour_only(int first, int count) {
+    AdamMask m;
+    m.means = m.scales = m.quats = m.opacities = false;
+    m.sh_first = first;
+    m.sh_count = count;
+    return m;
+  }
+  /// All groups, SH of channels [first, first + count) only.
+  static AdamMask band(int first, int count) {
+    AdamMask m;
+    m.sh_first = first;
+    m.sh_count = count;
+    return m;
+  }
+};
+
+/// Adam over the parameters of a `GaussianModel<G, S>`.
+///
+/// The moments are two models of the same layout as the parameters (`exp_avg`, `exp_avg_sq`), so
+/// densification gathers and appends their rows exactly like the model's (zeros for new Gaussians).
+///
+/// Masking: a group masked off in a step, and every SH channel outside the step's band range, gets
+/// NO update at all: its parameters and both moments stay bit-identical and its step counter does not
+/// advance. This differs from torch Adam with zeroed gradients (which keeps moving parameters on
+/// stale momentum and decays the moments): in a Joint model a band is rendered only every few steps,
+/// and momentum drift on the bands not seen would move their colours without evidence. Each group
+/// (means, scales, quats, opacities) keeps its own step counter and SH keeps one per colour channel
+/// (shared by the DC and higher-order coefficients of that channel, which always update together),
+/// so the bias correction of a band reflects how many times that band has actually been updated.
+///
+/// The position learning rate follows lr(t) = lr0 (lr1 / lr0)^(t / T), t = `iteration` (the number of
+/// `step` calls so far, i.e. the training step, whether or not the means were updated), clamped at T.
+template <class G, class S = float>
+class Adam {
+ public:
+  /// Per-group bias-correction step counters.
+  struct Steps {
+    std::int64_t means = 0, scales = 0, quats = 0, opacities = 0;
+    std::array<std::int64_t, G::bands> sh{};  ///< one per colour channel
+  };
+
+  AdamConfig config;
+  GaussianModel<G, S> exp_avg;     ///< first moments, layout of the model
+  GaussianModel<G, S> exp_avg_sq;  ///< second moments, layout of the model
+  Steps steps;                     ///< updates applied to each group / SH channel so far
+  std::int64_t iteration = 0;      ///< step() calls so far; drives the position lr schedule
+
+  explicit Adam(const AdamConfig& cfg = {}, std::size_t n = 0) : config(cfg) { reset(n); }
+
+  /// Zero state for `n` Gaussians; counters and iteration back to 0.
+  void reset(std::size_t n) {
+    exp_avg = GaussianModel<G, S>(n);
+    exp_avg_sq = GaussianModel<G, S>(n);
+    steps = Steps{};
+    iteration = 0;
+  }
+
+  /// Position learning rate at training step `t`, scene scale included.
+  double lr_means_at(std::int64_t t) const {
+    const double lr0 = config.lr_means, lr1 = config.lr_means_final;
+    if (config.lr_means_steps <= 0 || lr0 <= 0 || lr1 <= 0) return lr0 * config.scene_scale;
+    const double f = std::clamp(static_cast<double>(t) / static_cast<double>(config.lr_means_steps), 0.0, 1.0);
+    return std::exp(std::log(lr0) * (1.0 - f) + std::log(lr1) * f) * config.scene_scale;
+  }
+
+  /// One Adam step: `params -= lr * m_hat / (sqrt(v_hat) + eps)` for the groups and SH channels in
+  /// `mask`, using `grad` (same layout). Advances `iteration` by one.
+  void step(GaussianModel<G, S>& params, const GaussianModel<G, S>& grad, const AdamMask& mask = {}) {
+    check_sizes(params, grad);
+    int first = mask.sh_first, count = mask.sh_count < 0 ? G::bands - mask.sh_first : mask.sh_count;
+    if (mask.sh && (first < 0 || count < 0 || first + count > G::bands))
+      throw std::invalid_argument("Adam::step: mask SH channel range [" + std::to_string(first) + ", " +
+                                  std::to_string(first + count) + ") is outside [0, " + std::to_string(G::bands) +
+                                  ")");
+    const std::int64_t t = iteration++;
+    if (mask.means) update_flat(params.means, grad.means, exp_avg.means, exp_avg_sq.means, lr_means_at(t), ++steps.means);
+    if (mask.scales)
+      update_flat(params.log_scales, grad.log_scales, exp_avg.log_scales, exp_avg_sq.log_scales, config.lr_scales,
+                  ++steps.scales);
+    if (mask.quats) update_flat(params.quats, grad.quats, exp_avg.quats, exp_avg_sq.quats, config.lr_quats, ++steps.quats);
+    if (mask.opacities)
+      update_flat(params.opacity_logits, grad.opacity_logits, exp_avg.opacity_logits, exp_avg_sq.opacity_logits,
+                  config.lr_opacities, ++steps.opacities);
+    if (mask.sh && count > 0) update_sh(params, grad, first, count);
+  }
+
+ private:
+  struct Coeffs {
+    S step_size;     // lr / (1 - beta1^t)
+    S inv_bc2_sqrt;  // 1 / sqrt(1 - beta2^t)
+  };
+
+  Coeffs coeffs(double lr, std::int64_t t) const {
+    const double bc1 = 1.0 - std::pow(config.beta1, static_cast<double>(t));
+    const double bc2 = 1.0 - std::pow(config.beta2, static_cast<double>(t));
+    return {static_cast<S>(lr / bc1), static_cast<S>(1.0 / std::sqrt(bc2))};
+  }
+
+  /// The torch.optim.Adam element update (lerp form of the first moment).
+  static void update_one(S& p, S& m, S& v, S g, S b1c, S b2, S b2c, Coeffs k, S eps) {
+    m += b1c * (g - m);
+    v = b2 * v + b2c * g * g;
+    p -= k.step_size * m / (std::sqrt(v) * k.inv_bc2_sqrt + eps);
+  }
+
+  void update_flat(std::vector<S>& p, const std::vector<S>& g, std::vector<S>& m, std::vector<S>& v, double lr,
+                   std::int64_t t) const {
+    const Coeffs k = coeffs(lr, t);
+    const S b1c = static_cast<S>(1.0 - config.beta1), b2 = static_cast<S>(config.beta2),
+            b2c = static_cast<S>(1.0 - config.beta2), eps = static_cast<S>(config.eps);
+    const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(p.size());
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t i = 0; i < n; ++i) {
+      const std::size_t u = static_cast<std::size_t>(i);
+      update_one(p[u], m[u], v[u], g[u], b1c, b2, b2c, k, eps);
+    }
+  }
+
+  void update_sh(GaussianModel<G, S>& params, const GaussianModel<G, S>& grad, int first, int count) {
+    std::array<Coeffs, G::bands> dc{}, rest{};
+    for (int c = first; c < first + count; ++c) {
+      const std::int64_t t = ++steps.sh[static_cast<std::size_t>(c)];
+      dc[static_cast<std::size_t>(c)] = coeffs(config.lr_sh_dc, t);
+      rest[static_cast<std::size_t>(c)] = coeffs(config.lr_sh_rest, t);
+    }
+    const S b1c = static_cast<S>(1.0 - config.beta1), b2 = static_cast<S>(config.beta2),
+            b2c = static_cast<S>(1.0 - config.beta2), eps = static_cast<S>(config.eps);
+    const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(params.size());
+    S* p = params.sh.data();
+    const S* g = grad.sh.data();
+    S* m = exp_avg.sh.data();
+    S* v = exp_avg_sq.sh.data();
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t i = 0; i < n; ++i) {
+      for (int k = 0; k < G::sh_coeffs; ++k) {
+        const auto& kc = k == 0 ? dc : rest;
+        const std::ptrdiff_t row = (i * G::sh_coeffs + k) * G::bands;  // [N, K, Bands]
+        for (int c = first; c < first + count; ++c) {
+          const std::ptrdiff_t j = row + c;
+          update_one(p[j], m[j], v[j], g[j], b1c, b2, b2c, kc[static_cast<std::size_t>(c)], eps);
+        }
+      }
+    }
+  }
+
+  void check_sizes(const GaussianModel<G, S>& params, const GaussianModel<G, S>& grad) const {
+    params.check_consistent();
+    const std::size_t n = params.size();
+    const auto check = [n](const GaussianModel<G, S>& m, const char* name) {
+      m.check_consistent();
+      if (m.size() != n)
+        throw std::invalid_argument(std::string("Adam::step: ") + name + " holds " + std::to_string(m.size()) +
+                                    " Gaussians, the model " + std::to_string(n) +
+                                    " (densification must resize the optimiser state with the model)");
+    };
+    check(grad, "gradient");
+    check(exp_avg, "exp_avg");
+    check(exp_avg_sq, "exp_avg_sq");
+  }
+};
+
+}  // namespace msgs

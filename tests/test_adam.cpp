@@ -1,0 +1,205 @@
+// tests/test_adam.cpp
+// Checks adam.hpp against hand-computed Adam updates, and that masked groups and SH bands stay untouched.
+#include <doctest/doctest.h>
+
+#include <cmath>
+#include <cstdint>
+#include <random>
+#include <vector>
+
+#include "msgs/adam.hpp"
+
+namespace {
+
+using G7 = msgs::Gaussian<7, 1>;
+using Model = msgs::GaussianModel<G7, float>;
+
+using ModelD = msgs::GaussianModel<G7, double>;
+
+template <class S>
+void fill_random(msgs::GaussianModel<G7, S>& m, std::uint32_t seed, float lo, float hi) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<S> u(lo, hi);
+  for (auto* v : {&m.means, &m.log_scales, &m.quats, &m.opacity_logits, &m.sh})
+    for (auto& x : *v) x = u(rng);
+}
+
+/// Textbook Adam for one scalar, in double, from its own history of gradients.
+double textbook(double p, const std::vector<double>& grads, const std::vector<double>& lrs) {
+  const double b1 = 0.9, b2 = 0.999, eps = 1e-15;
+  double m = 0, v = 0;
+  for (std::size_t t = 1; t <= grads.size(); ++t) {
+    const double g = grads[t - 1];
+    m = b1 * m + (1 - b1) * g;
+    v = b2 * v + (1 - b2) * g * g;
+    const double mhat = m / (1 - std::pow(b1, double(t))), vhat = v / (1 - std::pow(b2, double(t)));
+    p -= lrs[t - 1] * mhat / (std::sqrt(vhat) + eps);
+  }
+  return p;
+}
+
+}  // namespace
+
+TEST_CASE("position learning rate decays exponentially from lr0 to lr1 over T steps") {
+  msgs::AdamConfig cfg;
+  cfg.lr_means_steps = 1000;
+  cfg.scene_scale = 2.0;
+  msgs::Adam<G7> adam(cfg);
+  CHECK(adam.lr_means_at(0) == doctest::Approx(2 * 1.6e-4).epsilon(1e-12));
+  CHECK(adam.lr_means_at(500) == doctest::Approx(2 * 1.6e-5).epsilon(1e-12));  // geometric midpoint
+  CHECK(adam.lr_means_at(1000) == doctest::Approx(2 * 1.6e-6).epsilon(1e-12));
+  CHECK(adam.lr_means_at(5000) == doctest::Approx(2 * 1.6e-6).epsilon(1e-12));  // clamped after T
+  CHECK(adam.lr_means_at(250) == doctest::Approx(2 * 1.6e-4 * std::pow(0.01, 0.25)).epsilon(1e-12));
+}
+
+TEST_CASE("three full steps match textbook Adam with per-group learning rates (double model)") {
+  const std::size_t n = 5;
+  ModelD p(n), p0(n);
+  fill_random(p, 1, -1.0f, 1.0f);
+  p0 = p;
+  msgs::AdamConfig cfg;
+  cfg.lr_means_steps = 10;
+  msgs::Adam<G7, double> adam(cfg, n);
+  std::vector<ModelD> grads;
+  for (int s = 0; s < 3; ++s) {
+    ModelD g(n);
+    fill_random(g, 10u + static_cast<std::uint32_t>(s), -2.0f, 2.0f);
+    adam.step(p, g);
+    grads.push_back(g);
+  }
+  CHECK(adam.iteration == 3);
+  CHECK(adam.steps.means == 3);
+  CHECK(adam.steps.sh[6] == 3);
+
+  // Compare the displacement from the start (not the value) so the tolerance is relative to the update.
+  auto moved = [&](auto member, std::size_t idx) {
+    return (p.*member)[idx] - (p0.*member)[idx];
+  };
+  auto expect = [&](auto member, std::size_t idx, std::vector<double> lrs) {
+    std::vector<double> gs;
+    for (const auto& g : grads) gs.push_back((g.*member)[idx]);
+    const double start = (p0.*member)[idx];
+    return doctest::Approx(textbook(start, gs, lrs) - start).epsilon(1e-9);
+  };
+  const std::vector<double> lr_pos = {adam.lr_means_at(0), adam.lr_means_at(1), adam.lr_means_at(2)};
+  CHECK(lr_pos[1] < lr_pos[0]);
+  for (std::size_t i = 0; i < 3 * n; ++i) {
+    CHECK(moved(&ModelD::means, i) == expect(&ModelD::means, i, lr_pos));
+    CHECK(moved(&ModelD::log_scales, i) == expect(&ModelD::log_scales, i, {5e-3, 5e-3, 5e-3}));
+  }
+  for (std::size_t i = 0; i < 4 * n; ++i)
+    CHECK(moved(&ModelD::quats, i) == expect(&ModelD::quats, i, {1e-3, 1e-3, 1e-3}));
+  for (std::size_t i = 0; i < n; ++i)
+    CHECK(moved(&ModelD::opacity_logits, i) == expect(&ModelD::opacity_logits, i, {0.05, 0.05, 0.05}));
+  for (std::size_t i = 0; i < n; ++i)
+    for (int k = 0; k < G7::sh_coeffs; ++k)
+      for (int c = 0; c < 7; ++c) {
+        const std::size_t idx = (i * G7::sh_coeffs + static_cast<std::size_t>(k)) * 7 + static_cast<std::size_t>(c);
+        const double lr = k == 0 ? 2.5e-3 : 1.25e-4;
+        CHECK(moved(&ModelD::sh, idx) == expect(&ModelD::sh, idx, {lr, lr, lr}));
+      }
+  // First step of Adam moves every parameter by about lr against the gradient sign.
+  ModelD q = p0;
+  msgs::Adam<G7, double> fresh(cfg, n);
+  fresh.step(q, grads[0]);
+  CHECK(q.opacity_logits[0] - p0.opacity_logits[0] ==
+        doctest::Approx(grads[0].opacity_logits[0] > 0 ? -0.05 : 0.05).epsilon(1e-9));
+}
+
+TEST_CASE("masked groups and SH bands outside the range are bit-identical, moments included") {
+  const std::size_t n = 9;
+  Model p(n), g(n);
+  fill_random(p, 3, -1.0f, 1.0f);
+  msgs::Adam<G7> adam({}, n);
+  // Warm up all moments so 'no change' is not just 'stays zero'.
+  fill_random(g, 4, -1.0f, 1.0f);
+  adam.step(p, g);
+  fill_random(g, 5, -1.0f, 1.0f);
+  const Model p_before = p, m_before = adam.exp_avg, v_before = adam.exp_avg_sq;
+
+  msgs::AdamMask mask = msgs::AdamMask::colour_only(3, 2);  // channels 3 and 4
+  adam.step(p, g, mask);
+  for (auto member : {&Model::means, &Model::log_scales, &Model::quats, &Model::opacity_logits}) {
+    CHECK((p.*member) == (p_before.*member));
+    CHECK((adam.exp_avg.*member) == (m_before.*member));
+    CHECK((adam.exp_avg_sq.*member) == (v_before.*member));
+  }
+  int changed = 0;
+  for (std::size_t i = 0; i < n; ++i)
+    for (int k = 0; k < G7::sh_coeffs; ++k)
+      for (int c = 0; c < 7; ++c) {
+        const float a = p.sh_at(i, k, c), b = p_before.sh_at(i, k, c);
+        const float ma = adam.exp_avg.sh_at(i, k, c), mb = m_before.sh_at(i, k, c);
+        const float va = adam.exp_avg_sq.sh_at(i, k, c), vb = v_before.sh_at(i, k, c);
+        if (c == 3 || c == 4) {
+          changed += (a != b) && (ma != mb) && (va != vb);
+        } else {
+          CHECK(a == b);
+          CHECK(ma == mb);
+          CHECK(va == vb);
+        }
+      }
+  CHECK(changed == static_cast<int>(n) * G7::sh_coeffs * 2);
+  CHECK(adam.steps.means == 1);
+  CHECK(adam.steps.opacities == 1);
+  CHECK(adam.iteration == 2);
+
+  // sh = false leaves every channel alone even with a range given.
+  msgs::AdamMask none = msgs::AdamMask::colour_only(0, 7);
+  none.sh = false;
+  const Model p2 = p, m2 = adam.exp_avg;
+  adam.step(p, g, none);
+  CHECK(p.sh == p2.sh);
+  CHECK(adam.exp_avg.sh == m2.sh);
+}
+
+TEST_CASE("per-channel SH step counters drive the bias correction of each band") {
+  const std::size_t n = 4;
+  Model p(n), g(n);
+  fill_random(p, 6, -1.0f, 1.0f);
+  fill_random(g, 7, -1.0f, 1.0f);
+  msgs::Adam<G7> adam({}, n);
+  adam.step(p, g, msgs::AdamMask::band(0, 3));
+  adam.step(p, g, msgs::AdamMask::band(0, 3));
+  const Model before = p;
+  adam.step(p, g, msgs::AdamMask::band(3, 4));
+  const std::array<std::int64_t, 7> want = {2, 2, 2, 1, 1, 1, 1};
+  CHECK(adam.steps.sh == want);
+  CHECK(adam.steps.means == 3);
+  // Channel 5 had its first update at step 3: a first Adam step moves by lr against the gradient.
+  for (std::size_t i = 0; i < n; ++i) {
+    const double d = static_cast<double>(p.sh_at(i, 0, 5)) - before.sh_at(i, 0, 5);
+    CHECK(d == doctest::Approx(g.sh_at(i, 0, 5) > 0 ? -2.5e-3 : 2.5e-3).epsilon(1e-4));
+    const double dr = static_cast<double>(p.sh_at(i, 2, 5)) - before.sh_at(i, 2, 5);
+    CHECK(dr == doctest::Approx(g.sh_at(i, 2, 5) > 0 ? -1.25e-4 : 1.25e-4).epsilon(1e-3));
+  }
+}
+
+TEST_CASE("zero gradients leave parameters unchanged; zero state rows for appended Gaussians work") {
+  Model p(3), g(3);
+  fill_random(p, 8, -1.0f, 1.0f);
+  g.set_zero();
+  msgs::Adam<G7> adam({}, 3);
+  const Model before = p;
+  adam.step(p, g);
+  CHECK(p.sh == before.sh);
+  CHECK(p.means == before.means);
+  // Densification appends rows with zeros to model, gradient and moments alike.
+  for (auto* m : {&p, &g, &adam.exp_avg, &adam.exp_avg_sq}) m->resize(5);
+  fill_random(g, 9, -1.0f, 1.0f);
+  adam.step(p, g);
+  for (auto* v : {&p.means, &p.sh, &adam.exp_avg_sq.sh})
+    for (float x : *v) CHECK(std::isfinite(x));
+}
+
+TEST_CASE("size mismatches and bad SH ranges throw") {
+  Model p(3), g(2);
+  msgs::Adam<G7> adam({}, 3);
+  CHECK_THROWS_AS(adam.step(p, g), std::invalid_argument);
+  Model g3(3);
+  msgs::Adam<G7> stale({}, 2);
+  CHECK_THROWS_AS(stale.step(p, g3), std::invalid_argument);
+  CHECK_THROWS_AS(adam.step(p, g3, msgs::AdamMask::band(5, 3)), std::invalid_argument);
+  CHECK_THROWS_AS(adam.step(p, g3, msgs::AdamMask::band(-1, 1)), std::invalid_argument);
+  CHECK(adam.iteration == 0);  // nothing applied on a rejected step
+}
