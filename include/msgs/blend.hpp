@@ -6,6 +6,7 @@
 #pragma once
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 
@@ -25,6 +26,9 @@ struct Splat {
 };
 
 /// Blending constants (REFERENCE §6).
+/// How many tile-list entries ahead the blend loops prefetch splat data (random access by id).
+inline constexpr std::uint64_t kPrefetchDistance = 4;
+
 template <class S>
 struct BlendConstants {
   static constexpr S kMaxAlpha = S(0.99);
@@ -63,6 +67,7 @@ struct BlendOutputs {
   S* depth = nullptr;               // [H, W], only with depth
   S* transmittance = nullptr;       // [H, W] final T
   std::uint32_t* last = nullptr;    // [H, W] 1 + position (in the tile list) of the last blended splat; 0 = none
+  std::uint16_t* row_mask = nullptr;// [M] per intersection: bit r set when the splat blended into tile row r
 };
 
 /// Gradients flowing into the blend backward.
@@ -114,23 +119,48 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
     for (int ch = 0; ch < NC; ++ch) acc[ch][p] = S(0);
     if constexpr (Depth) dacc[p] = S(0);
   }
-  int n_active = tb.w * tb.h;
-  std::uint64_t fragments = 0;
+  alignas(64) std::uint32_t blended[TP] = {};
+  // Rows whose pixels have all stopped are skipped; the check runs every kCheckEvery splats so
+  // that the hot loop carries no horizontal reductions.
+  constexpr int kCheckEvery = 8;
+  bool row_live[TS];
+  for (int r = 0; r < TS; ++r) row_live[r] = r < tb.h;
   const std::uint64_t begin = in.bins->tile_offset[std::size_t(tile)], end = in.bins->tile_offset[std::size_t(tile) + 1];
-  for (std::uint64_t j = begin; j < end && n_active > 0; ++j) {
-    const std::uint32_t g = in.bins->tile_list[j];
+  const std::uint32_t* list = in.bins->tile_list.data();
+  std::uint64_t j = begin;
+  for (; j < end; ++j) {
+    if ((j - begin) % kCheckEvery == 0 && j != begin) {
+      bool any = false;
+      for (int r = 0; r < tb.h; ++r) {
+        if (!row_live[r]) continue;
+        S live = S(0);
+        for (int x = 0; x < TS; ++x) live = std::max(live, active[r * TS + x]);
+        row_live[r] = live > S(0);
+        any = any || row_live[r];
+      }
+      if (!any) break;
+    }
+    if (j + kPrefetchDistance < end) {
+      const std::uint32_t gp = list[j + kPrefetchDistance];
+      __builtin_prefetch(in.splats + gp);
+      __builtin_prefetch(in.colours + std::size_t(gp) * std::size_t(nc));
+    }
+    const std::uint32_t g = list[j];
     const Splat<S> s = in.splats[g];
     const int r0 = std::max(s.rect.y0 - tb.y0, 0), r1 = std::min(s.rect.y1 - tb.y0, tb.h - 1);
     S col[NC];
     for (int ch = 0; ch < NC; ++ch) col[ch] = ch < nc ? in.colours[std::size_t(g) * std::size_t(nc) + std::size_t(ch)] : S(0);
     const std::uint32_t pos = std::uint32_t(j - begin + 1);
-    int stops = 0, blended = 0;
+    std::uint32_t rows_blended = 0;
     for (int r = r0; r <= r1; ++r) {
+      if (!row_live[r]) continue;
       const S dy = S(tb.y0 + r) + S(0.5) - s.my;
       S* Tr = T + r * TS;
       S* ar = active + r * TS;
       std::uint32_t* lr = last + r * TS;
-#pragma omp simd reduction(+ : stops, blended)
+      std::uint32_t* br = blended + r * TS;
+      int row_took = 0;
+#pragma omp simd reduction(| : row_took)
       for (int x = 0; x < TS; ++x) {
         const S dx = S(tb.x0 + x) + S(0.5) - s.mx;
         const S sigma = splat_sigma(s.a, s.b, s.c, dx, dy);
@@ -145,13 +175,16 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
         Tr[x] = take ? next_T : Tr[x];
         ar[x] = stop ? S(0) : ar[x];
         lr[x] = take ? pos : lr[x];
-        stops += stop ? 1 : 0;
-        blended += take ? 1 : 0;
+        br[x] += take ? 1u : 0u;
+        row_took |= take ? 1 : 0;
       }
+      rows_blended |= std::uint32_t(row_took) << r;
     }
-    n_active -= stops;
-    fragments += std::uint64_t(blended);
+    out.row_mask[j] = std::uint16_t(rows_blended);
   }
+  for (; j < end; ++j) out.row_mask[j] = 0;  // entries after every pixel stopped
+  std::uint64_t fragments = 0;
+  for (int p = 0; p < TP; ++p) fragments += blended[p];
   const int W = in.grid->width;
   for (int y = 0; y < tb.h; ++y)
     for (int x = 0; x < tb.w; ++x) {
@@ -172,7 +205,7 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
 /// tile's background gradient into `d_background` ([count]).
 template <class S, int C, int MaxC, bool Depth>
 inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmittance, const std::uint32_t* last_in,
-                           const BlendGradInputs<S>& gin, S* records, S* d_background) {
+                           const std::uint16_t* row_mask, const BlendGradInputs<S>& gin, S* records, S* d_background) {
   constexpr int TS = TileGrid::kTileSize, TP = TileGrid::kTilePixels;
   constexpr int NC = C > 0 ? C : MaxC;
   using K = BlendConstants<S>;
@@ -215,8 +248,14 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
   for (int ch = 0; ch < nc; ++ch) d_background[ch] += bg_grad[ch];
 
   constexpr int NL = BlendRecord::kBase + NC;  // lane accumulators per record entry
+  const std::uint32_t* list = in.bins->tile_list.data();
   for (std::uint64_t jr = begin + max_last; jr-- > begin;) {
-    const std::uint32_t g = in.bins->tile_list[jr];
+    if (jr >= begin + kPrefetchDistance) {
+      const std::uint32_t gp = list[jr - kPrefetchDistance];
+      __builtin_prefetch(in.splats + gp);
+      __builtin_prefetch(in.colours + std::size_t(gp) * std::size_t(nc));
+    }
+    const std::uint32_t g = list[jr];
     const Splat<S> s = in.splats[g];
     const std::uint32_t k = std::uint32_t(jr - begin);  // pixel blends this splat iff k < last[p]
     S col[NC];
@@ -224,8 +263,9 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
     alignas(64) S lane[NL][TS];
     for (int l = 0; l < NL; ++l)
       for (int x = 0; x < TS; ++x) lane[l][x] = S(0);
-    const int r0 = std::max(s.rect.y0 - tb.y0, 0), r1 = std::min(s.rect.y1 - tb.y0, tb.h - 1);
-    for (int r = r0; r <= r1; ++r) {
+    // Only the rows where the forward blended this splat (its row mask) can carry gradient.
+    for (std::uint32_t rows = row_mask[jr]; rows != 0; rows &= rows - 1) {
+      const int r = std::countr_zero(rows);
       const S dy = S(tb.y0 + r) + S(0.5) - s.my;
 #pragma omp simd
       for (int x = 0; x < TS; ++x) {
