@@ -363,3 +363,35 @@ TEST_CASE("gradients of Gaussians beyond the image are exactly zero and finite")
   CHECK(all_finite(g.model.means));
   CHECK(all_finite(g.model.sh));
 }
+
+TEST_CASE("background gradient when some tiles hold no Gaussian") {
+  // Every Gaussian in the left half of a 64x32 image: the right-hand tiles are empty, and their
+  // pixels show the background alone (T = 1), so dL/d(background) must count them too.
+  using G = Gaussian<1, 0>;
+  Camera<double> cam;
+  cam.width = 64;
+  cam.height = 32;
+  cam.fx = cam.fy = 40;
+  cam.cx = 32;
+  cam.cy = 16;
+  GaussianModel<G, double> model(3);
+  for (std::size_t i = 0; i < 3; ++i) {
+    const double xyz[3] = {-0.5 + 0.1 * double(i), -0.1 + 0.1 * double(i), 3.0 + double(i)};
+    for (int k = 0; k < 3; ++k) model.means[3 * i + static_cast<std::size_t>(k)] = xyz[k];
+    for (int k = 0; k < 3; ++k) model.log_scales[3 * i + static_cast<std::size_t>(k)] = std::log(0.05);
+    model.quats[4 * i] = 1;
+    model.opacity_logits[i] = 0.5;
+  }
+  RenderSettings<double> rs;
+  rs.background = {0.4};
+  LinearLoss<G, kPlain> L(cam, rs, 1, 14);
+  Gradients<G, double> g;
+  L.gradients(model, g);
+  REQUIRE(g.background.size() == 1);
+  const double h = 1e-6;
+  L.rs.background = {0.4 + h};
+  const double lp = L(model);
+  L.rs.background = {0.4 - h};
+  const double lm = L(model);
+  CHECK(g.background[0] == doctest::Approx((lp - lm) / (2 * h)).epsilon(1e-6));
+}
