@@ -170,22 +170,26 @@ TEST_CASE("float gradient agrees with the double gradient") {
 }
 
 TEST_CASE("loss and gradient are bit-identical whatever the thread count") {
-  const auto x = random_image<float>(67, 45, 3, 21);
-  const auto y = random_image<float>(67, 45, 3, 22);
   const int saved = omp_get_max_threads();
-  std::vector<float> first;
-  double first_value = 0;
-  for (int threads : {1, 2, 3, 5}) {
-    omp_set_num_threads(threads);
-    Image<float> g;
-    msgs::SsimWorkspace<float> ws;
-    const double v = msgs::photometric_loss(x, y, &g, ws);
-    if (first.empty()) {
-      first = g.data;
-      first_value = v;
-    } else {
-      CHECK(v == first_value);
-      CHECK(g.data == first);
+  // Tall enough for several row blocks, and shorter than the thread count.
+  for (const Size3 s : {Size3{67, 45, 3}, Size3{5, 3, 1}, Size3{1, 1, 7}}) {
+    CAPTURE(s.w); CAPTURE(s.h); CAPTURE(s.c);
+    const auto x = random_image<float>(s.w, s.h, s.c, 21);
+    const auto y = random_image<float>(s.w, s.h, s.c, 22);
+    std::vector<float> first;
+    double first_value = 0;
+    for (int threads : {1, 2, 3, 5, 8}) {
+      omp_set_num_threads(threads);
+      Image<float> g;
+      msgs::SsimWorkspace<float> ws;
+      const double v = msgs::photometric_loss(x, y, &g, ws);
+      if (first.empty()) {
+        first = g.data;
+        first_value = v;
+      } else {
+        CHECK(v == first_value);
+        CHECK(g.data == first);
+      }
     }
   }
   omp_set_num_threads(saved);

@@ -11,6 +11,10 @@
 #include <string>
 #include <vector>
 
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
 #include "msgs/gaussian.hpp"
 #include "msgs/image.hpp"
 
@@ -45,21 +49,30 @@ std::array<S, ssim_window_size> ssim_window_1d() {
   return w;
 }
 
-/// Scratch buffers of the SSIM forward/backward, reusable across calls so that a training step does
-/// not allocate. All buffers are row-major over the interleaved image: [H, W * C].
+/// Scratch space of the SSIM forward/backward, reusable across calls so that a training step neither
+/// allocates nor page-faults. The derivative maps are stored with zero borders of R*C values on both
+/// sides of each row, so the backward's horizontal pass reads them in place.
 template <class S>
 struct SsimWorkspace {
   int width = 0, height = 0, channels = 0;
-  std::vector<S> hx, hy, hxx, hyy, hxy;  ///< [H, W*C] horizontally filtered x, y, x^2, y^2, xy
-  std::vector<S> d_mu, d_exx, d_exy;     ///< [H, W*C] dSSIM(p)/d mu_x(p), /d E[x^2](p), /d E[xy](p)
-  std::vector<double> row_sums;          ///< [H, C]   sum over x of the SSIM map, per row and channel
-  bool has_bwd_state = false;            ///< d_* hold the maps of the last forward
+  std::vector<S> d_mu, d_exx, d_exy;  ///< [H, W*C + 2 R C] dSSIM(p)/d mu_x(p), /d E[x^2](p), /d E[xy](p)
+  std::vector<double> row_sums;       ///< [H, C] sum over x of the SSIM map, per row and channel
+  std::vector<std::vector<S>> thread_scratch;  ///< one per OpenMP thread: row ring and row buffers
+  bool has_bwd_state = false;         ///< d_* hold the maps of the last forward
 
-  void resize(int w, int h, int c) {
+  /// Row stride of the derivative maps.
+  std::ptrdiff_t map_stride() const {
+    return static_cast<std::ptrdiff_t>(width + 2 * ssim_window_radius) * channels;
+  }
+
+  void resize(int w, int h, int c, bool with_maps) {
+    const bool same = w == width && h == height && c == channels;
     width = w; height = h; channels = c;
-    const std::size_t n = static_cast<std::size_t>(w) * static_cast<std::size_t>(h) * static_cast<std::size_t>(c);
-    for (auto* v : {&hx, &hy, &hxx, &hyy, &hxy}) v->resize(n);
     row_sums.resize(static_cast<std::size_t>(h) * static_cast<std::size_t>(c));
+    const std::size_t n = static_cast<std::size_t>(h) * static_cast<std::size_t>(map_stride());
+    // Borders must be zero; only the interiors are ever written, so a same-shape reuse keeps them.
+    if (with_maps && (!same || d_mu.size() != n))
+      for (auto* v : {&d_mu, &d_exx, &d_exy}) v->assign(n, S(0));
     has_bwd_state = false;
   }
 };
@@ -83,33 +96,167 @@ void check_image(const char* what, const char* field, const Image<S>& im) {
                                 std::to_string(im.height) + "*" + std::to_string(im.channels));
 }
 
-/// One interleaved row filtered horizontally with zero padding:
-/// out[x*C + c] = sum_k w[k] in[(x + k - R)*C + c] over x + k - R inside the row. The loop over k is
-/// outermost so that every inner loop is a contiguous, vectorisable axpy, and each output sums its
-/// terms in the same order (k ascending) whatever the threading.
+/// Contiguous block [first, last) of `n` rows for thread `t` of `nt`. Which thread computes a row
+/// never changes its value: every row is computed by the same sequence of operations.
+inline void thread_rows(int n, int& first, int& last) {
+#ifdef _OPENMP
+  const long t = omp_get_thread_num(), nt = omp_get_num_threads();
+#else
+  const long t = 0, nt = 1;
+#endif
+  first = static_cast<int>(n * t / nt);
+  last = static_cast<int>(n * (t + 1) / nt);
+}
+
+/// Horizontal pass over one interleaved row: out[x*C + c] = sum_k w[k] in[(x + k - R)*C + c]. `in` is
+/// padded with R*C zeros on both sides (the reference's zero padding), so every output sums the same 11
+/// terms in the same order (k ascending), and the loop over j vectorises.
 template <class S>
-inline void ssim_hfilter_row(const S* in, S* out, int width, int channels, const S* w) {
-  const std::ptrdiff_t len = static_cast<std::ptrdiff_t>(width) * channels;
-  std::fill(out, out + len, S(0));
-  for (int k = 0; k < ssim_window_size; ++k) {
-    const std::ptrdiff_t d = static_cast<std::ptrdiff_t>(k - ssim_window_radius) * channels;
-    const std::ptrdiff_t lo = std::max<std::ptrdiff_t>(0, -d), hi = std::min<std::ptrdiff_t>(len, len - d);
-    const S wk = w[k];
-    for (std::ptrdiff_t j = lo; j < hi; ++j) out[j] += wk * in[j + d];
+inline void ssim_hfilter_row(const S* __restrict in, S* __restrict out, std::ptrdiff_t len, int channels,
+                             const S* __restrict w) {
+  for (std::ptrdiff_t j = 0; j < len; ++j) {
+    S acc = w[0] * in[j];
+#pragma GCC unroll 10
+    for (int k = 1; k < ssim_window_size; ++k) acc += w[k] * in[j + static_cast<std::ptrdiff_t>(k) * channels];
+    out[j] = acc;
   }
 }
 
-/// Output row `r` of the vertical pass over an [H, len] buffer, zero padding above and below.
+/// Vertical pass for one output row from the 11 horizontally filtered rows around it (a zero row
+/// stands for rows outside the image), summed in k order like the horizontal pass.
 template <class S>
-inline void ssim_vfilter_row(const S* src, S* out, int r, int height, std::ptrdiff_t len, const S* w) {
-  std::fill(out, out + len, S(0));
-  for (int k = 0; k < ssim_window_size; ++k) {
-    const int rr = r + k - ssim_window_radius;
-    if (rr < 0 || rr >= height) continue;
-    const S* row = src + static_cast<std::ptrdiff_t>(rr) * len;
-    const S wk = w[k];
-    for (std::ptrdiff_t j = 0; j < len; ++j) out[j] += wk * row[j];
+inline void ssim_vfilter_row(const S* const* rows, S* __restrict out, std::ptrdiff_t len, const S* __restrict w) {
+  const S *r0 = rows[0], *r1 = rows[1], *r2 = rows[2], *r3 = rows[3], *r4 = rows[4], *r5 = rows[5], *r6 = rows[6],
+          *r7 = rows[7], *r8 = rows[8], *r9 = rows[9], *r10 = rows[10];
+  for (std::ptrdiff_t j = 0; j < len; ++j)
+    out[j] = w[0] * r0[j] + w[1] * r1[j] + w[2] * r2[j] + w[3] * r3[j] + w[4] * r4[j] + w[5] * r5[j] +
+             w[6] * r6[j] + w[7] * r7[j] + w[8] * r8[j] + w[9] * r9[j] + w[10] * r10[j];
+}
+
+/// Per-thread sliding window of horizontally filtered rows for `Q` quantities: slot (row % 11) holds
+/// row `row`, so the 11 rows around an output row are always resident and each is filtered once
+/// (plus a 10-row halo per thread), instead of going through full-size intermediate images.
+/// Lives in caller-provided storage (reused across calls) followed by `extra` values for the caller.
+template <class S, int Q>
+struct SsimRowRing {
+  std::ptrdiff_t len, pad;
+  int height;
+  S* ring;    // [Q, 11, len]
+  S* padded;  // [Q, len + 2 pad] inputs of the horizontal pass, zero borders
+  S* zero;    // [len]
+  S* extra;   // [extra]
+  int next = 0;  // next image row to filter into the ring
+
+  SsimRowRing(std::vector<S>& storage, std::ptrdiff_t len_, int channels, int height_, std::ptrdiff_t extra_len)
+      : len(len_), pad(static_cast<std::ptrdiff_t>(ssim_window_radius) * channels), height(height_) {
+    const std::ptrdiff_t n_ring = Q * ssim_window_size * len, n_pad = Q * (len + 2 * pad);
+    storage.resize(static_cast<std::size_t>(n_ring + n_pad + len + extra_len));
+    ring = storage.data();
+    padded = ring + n_ring;
+    zero = padded + n_pad;
+    extra = zero + len;
+    std::fill(padded, zero + len, S(0));
   }
+
+  /// Interior of the padded input row of quantity q, to be filled before `filter`.
+  S* input(int q) { return padded + q * (len + 2 * pad) + pad; }
+  S* slot(int q, int row) { return ring + (q * ssim_window_size + row % ssim_window_size) * len; }
+  /// Horizontal pass of image row `row`: from input(q) (or `src[q]`, padded rows) into its slot.
+  void filter(int row, int channels, const S* w, const S* const* src = nullptr) {
+    for (int q = 0; q < Q; ++q)
+      ssim_hfilter_row((src ? src[q] : input(q)) - pad, slot(q, row), len, channels, w);
+  }
+  /// The 11 rows of quantity q around output row r (zero rows outside the image).
+  void rows_around(int q, int r, const S** rows) {
+    for (int k = 0; k < ssim_window_size; ++k) {
+      const int rr = r + k - ssim_window_radius;
+      rows[k] = (rr < 0 || rr >= height) ? zero : slot(q, rr);
+    }
+  }
+};
+
+/// Per-thread scratch vectors of a workspace, one per possible OpenMP thread (call outside parallel).
+template <class S>
+inline void reserve_thread_scratch(std::vector<std::vector<S>>& scratch) {
+#ifdef _OPENMP
+  const std::size_t n = static_cast<std::size_t>(omp_get_max_threads());
+#else
+  const std::size_t n = 1;
+#endif
+  if (scratch.size() < n) scratch.resize(n);
+}
+
+inline int thread_index() {
+#ifdef _OPENMP
+  return omp_get_thread_num();
+#else
+  return 0;
+#endif
+}
+
+/// Inputs of the forward's horizontal pass for one row: x, y, x^2, y^2, xy.
+template <class S>
+inline void ssim_inputs_row(const S* __restrict xr, const S* __restrict yr, S* __restrict px, S* __restrict py,
+                            S* __restrict pxx, S* __restrict pyy, S* __restrict pxy, std::ptrdiff_t len) {
+  for (std::ptrdiff_t j = 0; j < len; ++j) {
+    px[j] = xr[j];
+    py[j] = yr[j];
+    pxx[j] = xr[j] * xr[j];
+    pyy[j] = yr[j] * yr[j];
+    pxy[j] = xr[j] * yr[j];
+  }
+}
+
+/// Filtered statistics of one row ([W*C] each): mu_x, mu_y, E[x^2], E[y^2], E[xy].
+template <class S>
+struct SsimRowStats {
+  const S *mx, *my, *exx, *eyy, *exy;
+};
+
+/// SSIM map of one row and, with `Keep`, its partial derivatives with respect to mu_x, E[x^2], E[xy]:
+/// S = A1 A2 / (B1 B2), A1 = 2 mx my + C1, A2 = 2 (Exy - mx my) + C2, B1 = mx^2 + my^2 + C1,
+/// B2 = Exx - mx^2 + Eyy - my^2 + C2. Branch-free so that it vectorises.
+template <bool Keep, class S>
+inline void ssim_map_row(const SsimRowStats<S>& st, std::ptrdiff_t len, S c1, S c2, S* __restrict smap,
+                         S* __restrict d_mu, S* __restrict d_exx, S* __restrict d_exy) {
+  const S* __restrict mx = st.mx;
+  const S* __restrict my = st.my;
+  const S* __restrict exx = st.exx;
+  const S* __restrict eyy = st.eyy;
+  const S* __restrict exy = st.exy;
+  for (std::ptrdiff_t j = 0; j < len; ++j) {
+    const S ux = mx[j], uy = my[j];
+    const S ux2 = ux * ux, uy2 = uy * uy, uxy = ux * uy;
+    const S a1 = 2 * uxy + c1;
+    const S a2 = 2 * (exy[j] - uxy) + c2;
+    const S b1 = ux2 + uy2 + c1;
+    // Both variances are >= 0 in exact arithmetic (the window weights sum to <= 1), so b2 >= C2 > 0.
+    const S b2 = (exx[j] - ux2) + (eyy[j] - uy2) + c2;
+    const S inv = S(1) / (b1 * b2);
+    const S s = a1 * a2 * inv;
+    smap[j] = s;
+    if constexpr (Keep) {
+      d_mu[j] = 2 * inv * (uy * (a2 - a1) - ux * s * (b2 - b1));
+      d_exx[j] = -s / b2;
+      d_exy[j] = 2 * a1 * inv;
+    }
+  }
+}
+
+/// Sum of p[0], p[stride], ... (count terms) in double, four interleaved accumulators combined in a
+/// fixed order: deterministic, and not one long dependency chain.
+template <class S>
+inline double strided_sum(const S* p, std::ptrdiff_t count, std::ptrdiff_t stride) {
+  double a0 = 0, a1 = 0, a2 = 0, a3 = 0;
+  std::ptrdiff_t i = 0;
+  for (; i + 4 <= count; i += 4) {
+    a0 += static_cast<double>(p[i * stride]);
+    a1 += static_cast<double>(p[(i + 1) * stride]);
+    a2 += static_cast<double>(p[(i + 2) * stride]);
+    a3 += static_cast<double>(p[(i + 3) * stride]);
+  }
+  for (; i < count; ++i) a0 += static_cast<double>(p[i * stride]);
+  return (a0 + a1) + (a2 + a3);
 }
 
 }  // namespace detail
@@ -118,7 +265,8 @@ inline void ssim_vfilter_row(const S* src, S* out, int r, int height, std::ptrdi
 /// the 11x11 Gaussian window summing over the zero-padded images ("same" convolution, as the 3DGS
 /// reference `F.conv2d(..., padding=5, groups=C)`). With `keep_for_bwd` the per-pixel partial
 /// derivatives of the map are kept in `ws` for `ssim_bwd`. `per_channel` (optional) receives the mean
-/// over pixels of each channel. Deterministic: rows are independent and reductions run in row order.
+/// over pixels of each channel. Deterministic whatever the thread count: every row is computed by the
+/// same operations, and reductions run in row order. An empty image gives 0.
 template <class S>
 double ssim_fwd(const Image<S>& x, const Image<S>& y, SsimWorkspace<S>& ws, bool keep_for_bwd = false,
                 std::vector<double>* per_channel = nullptr) {
@@ -126,76 +274,52 @@ double ssim_fwd(const Image<S>& x, const Image<S>& y, SsimWorkspace<S>& ws, bool
   detail::check_image("ssim", "y", y);
   detail::check_same_shape("ssim", x.width, x.height, x.channels, y.width, y.height, y.channels);
   const int W = x.width, H = x.height, C = x.channels;
-  ws.resize(W, H, C);
-  if (keep_for_bwd)
-    for (auto* v : {&ws.d_mu, &ws.d_exx, &ws.d_exy}) v->resize(ws.hx.size());
+  ws.resize(W, H, C, keep_for_bwd);
   if (per_channel) per_channel->assign(static_cast<std::size_t>(C), 0.0);
   if (x.data.empty()) {
     ws.has_bwd_state = keep_for_bwd;
     return 0.0;
   }
   const std::ptrdiff_t len = static_cast<std::ptrdiff_t>(W) * C;
+  const std::ptrdiff_t ms = ws.map_stride(), mpad = static_cast<std::ptrdiff_t>(ssim_window_radius) * C;
   const auto win = ssim_window_1d<S>();
   const S* w = win.data();
-
-  // Horizontal pass of x, y, x^2, y^2, xy.
-#pragma omp parallel
-  {
-    std::vector<S> pxx(static_cast<std::size_t>(len)), pyy(pxx.size()), pxy(pxx.size());
-#pragma omp for schedule(static)
-    for (int r = 0; r < H; ++r) {
-      const S* xr = x.data.data() + r * len;
-      const S* yr = y.data.data() + r * len;
-      for (std::ptrdiff_t j = 0; j < len; ++j) {
-        pxx[static_cast<std::size_t>(j)] = xr[j] * xr[j];
-        pyy[static_cast<std::size_t>(j)] = yr[j] * yr[j];
-        pxy[static_cast<std::size_t>(j)] = xr[j] * yr[j];
-      }
-      const std::ptrdiff_t o = r * len;
-      detail::ssim_hfilter_row(xr, ws.hx.data() + o, W, C, w);
-      detail::ssim_hfilter_row(yr, ws.hy.data() + o, W, C, w);
-      detail::ssim_hfilter_row(pxx.data(), ws.hxx.data() + o, W, C, w);
-      detail::ssim_hfilter_row(pyy.data(), ws.hyy.data() + o, W, C, w);
-      detail::ssim_hfilter_row(pxy.data(), ws.hxy.data() + o, W, C, w);
-    }
-  }
-
-  // Vertical pass, SSIM map and its partial derivatives w.r.t. the filtered statistics of x.
   const S c1 = static_cast<S>(ssim_c1), c2 = static_cast<S>(ssim_c2);
+  detail::reserve_thread_scratch(ws.thread_scratch);
+
 #pragma omp parallel
   {
-    std::vector<S> mx(static_cast<std::size_t>(len)), my(mx.size()), exx(mx.size()), eyy(mx.size()), exy(mx.size());
-    std::vector<double> sums(static_cast<std::size_t>(C));
-#pragma omp for schedule(static)
-    for (int r = 0; r < H; ++r) {
-      detail::ssim_vfilter_row(ws.hx.data(), mx.data(), r, H, len, w);
-      detail::ssim_vfilter_row(ws.hy.data(), my.data(), r, H, len, w);
-      detail::ssim_vfilter_row(ws.hxx.data(), exx.data(), r, H, len, w);
-      detail::ssim_vfilter_row(ws.hyy.data(), eyy.data(), r, H, len, w);
-      detail::ssim_vfilter_row(ws.hxy.data(), exy.data(), r, H, len, w);
-      std::fill(sums.begin(), sums.end(), 0.0);
-      const std::ptrdiff_t o = r * len;
-      for (std::ptrdiff_t j = 0; j < len; ++j) {
-        const std::size_t u = static_cast<std::size_t>(j);
-        const S ux = mx[u], uy = my[u];
-        const S ux2 = ux * ux, uy2 = uy * uy, uxy = ux * uy;
-        const S a1 = 2 * uxy + c1;
-        const S a2 = 2 * (exy[u] - uxy) + c2;
-        const S b1 = ux2 + uy2 + c1;
-        // Both variances are >= 0 in exact arithmetic (the window weights sum to <= 1), so b2 >= C2.
-        const S b2 = (exx[u] - ux2) + (eyy[u] - uy2) + c2;
-        const S inv = S(1) / (b1 * b2);
-        const S s = a1 * a2 * inv;
-        sums[static_cast<std::size_t>(j % C)] += static_cast<double>(s);
-        if (keep_for_bwd) {
-          // S = A1 A2 / (B1 B2) with A1 = 2 ux uy + C1, A2 = 2 (Exy - ux uy) + C2, B1 = ux^2 + uy^2 + C1,
-          // B2 = Exx - ux^2 + Eyy - uy^2 + C2.
-          ws.d_mu[static_cast<std::size_t>(o + j)] = 2 * inv * (uy * (a2 - a1) - ux * s * (b2 - b1));
-          ws.d_exx[static_cast<std::size_t>(o + j)] = -s / b2;
-          ws.d_exy[static_cast<std::size_t>(o + j)] = 2 * a1 * inv;
+    int r0 = 0, r1 = 0;
+    detail::thread_rows(H, r0, r1);
+    if (r0 < r1) {
+      // Quantities 0..4: x, y, x^2, y^2, xy; extra: 5 filtered statistics rows and the SSIM map row.
+      detail::SsimRowRing<S, 5> ring(ws.thread_scratch[static_cast<std::size_t>(detail::thread_index())], len, C, H,
+                                     6 * len);
+      S* stats = ring.extra;
+      S* smap = ring.extra + 5 * len;
+      const S* rows[ssim_window_size];
+      ring.next = std::max(0, r0 - ssim_window_radius);
+      for (int r = r0; r < r1; ++r) {
+        for (; ring.next <= std::min(H - 1, r + ssim_window_radius); ++ring.next) {
+          detail::ssim_inputs_row(x.data.data() + ring.next * len, y.data.data() + ring.next * len, ring.input(0),
+                                  ring.input(1), ring.input(2), ring.input(3), ring.input(4), len);
+          ring.filter(ring.next, C, w);
         }
+        for (int q = 0; q < 5; ++q) {
+          ring.rows_around(q, r, rows);
+          detail::ssim_vfilter_row(rows, stats + q * len, len, w);
+        }
+        const detail::SsimRowStats<S> st{stats, stats + len, stats + 2 * len, stats + 3 * len, stats + 4 * len};
+        const std::ptrdiff_t o = r * ms + mpad;
+        if (keep_for_bwd)
+          detail::ssim_map_row<true>(st, len, c1, c2, smap, ws.d_mu.data() + o, ws.d_exx.data() + o,
+                                     ws.d_exy.data() + o);
+        else
+          detail::ssim_map_row<false, S>(st, len, c1, c2, smap, nullptr, nullptr, nullptr);
+        for (int c = 0; c < C; ++c)
+          ws.row_sums[static_cast<std::size_t>(r) * static_cast<std::size_t>(C) + static_cast<std::size_t>(c)] =
+              detail::strided_sum(smap + c, W, C);
       }
-      std::copy(sums.begin(), sums.end(), ws.row_sums.begin() + static_cast<std::ptrdiff_t>(r) * C);
     }
   }
   ws.has_bwd_state = keep_for_bwd;
@@ -204,7 +328,8 @@ double ssim_fwd(const Image<S>& x, const Image<S>& y, SsimWorkspace<S>& ws, bool
   double total = 0;
   for (int c = 0; c < C; ++c) {
     double sc = 0;
-    for (int r = 0; r < H; ++r) sc += ws.row_sums[static_cast<std::size_t>(r) * static_cast<std::size_t>(C) + static_cast<std::size_t>(c)];
+    for (int r = 0; r < H; ++r)
+      sc += ws.row_sums[static_cast<std::size_t>(r) * static_cast<std::size_t>(C) + static_cast<std::size_t>(c)];
     if (per_channel) (*per_channel)[static_cast<std::size_t>(c)] = sc / static_cast<double>(x.pixels());
     total += sc;
   }
@@ -229,34 +354,38 @@ void ssim_bwd(const Image<S>& x, const Image<S>& y, SsimWorkspace<S>& ws, S scal
   const std::ptrdiff_t len = static_cast<std::ptrdiff_t>(W) * C;
   const auto win = ssim_window_1d<S>();
   const S* w = win.data();
-  // The forward's horizontal buffers are free now; reuse three of them.
-  S* ha = ws.hx.data();
-  S* hb = ws.hxx.data();
-  S* hc = ws.hxy.data();
-#pragma omp parallel for schedule(static)
-  for (int r = 0; r < H; ++r) {
-    const std::ptrdiff_t o = r * len;
-    detail::ssim_hfilter_row(ws.d_mu.data() + o, ha + o, W, C, w);
-    detail::ssim_hfilter_row(ws.d_exx.data() + o, hb + o, W, C, w);
-    detail::ssim_hfilter_row(ws.d_exy.data() + o, hc + o, W, C, w);
-  }
-  ws.has_bwd_state = false;  // the horizontal buffers no longer hold the forward's statistics
   const S k = scale / static_cast<S>(x.size());  // the mean's 1/(H W C)
+  const std::ptrdiff_t ms = ws.map_stride(), mpad = static_cast<std::ptrdiff_t>(ssim_window_radius) * C;
+  detail::reserve_thread_scratch(ws.thread_scratch);
 #pragma omp parallel
   {
-    std::vector<S> fa(static_cast<std::size_t>(len)), fb(fa.size()), fc(fa.size());
-#pragma omp for schedule(static)
-    for (int r = 0; r < H; ++r) {
-      detail::ssim_vfilter_row(ha, fa.data(), r, H, len, w);
-      detail::ssim_vfilter_row(hb, fb.data(), r, H, len, w);
-      detail::ssim_vfilter_row(hc, fc.data(), r, H, len, w);
-      const std::ptrdiff_t o = r * len;
-      const S* xr = x.data.data() + o;
-      const S* yr = y.data.data() + o;
-      S* gr = grad_x.data.data() + o;
-      for (std::ptrdiff_t j = 0; j < len; ++j) {
-        const std::size_t u = static_cast<std::size_t>(j);
-        gr[j] += k * (fa[u] + 2 * xr[j] * fb[u] + yr[j] * fc[u]);
+    int r0 = 0, r1 = 0;
+    detail::thread_rows(H, r0, r1);
+    if (r0 < r1) {
+      // Quantities 0..2: d_mu, d_exx, d_exy, read in place from the padded maps; extra: 3 filtered rows.
+      detail::SsimRowRing<S, 3> ring(ws.thread_scratch[static_cast<std::size_t>(detail::thread_index())], len, C, H,
+                                     3 * len);
+      S* f = ring.extra;
+      const S* rows[ssim_window_size];
+      ring.next = std::max(0, r0 - ssim_window_radius);
+      for (int r = r0; r < r1; ++r) {
+        for (; ring.next <= std::min(H - 1, r + ssim_window_radius); ++ring.next) {
+          const std::ptrdiff_t o = ring.next * ms + mpad;
+          const S* src[3] = {ws.d_mu.data() + o, ws.d_exx.data() + o, ws.d_exy.data() + o};
+          ring.filter(ring.next, C, w, src);
+        }
+        for (int q = 0; q < 3; ++q) {
+          ring.rows_around(q, r, rows);
+          detail::ssim_vfilter_row(rows, f + q * len, len, w);
+        }
+        const std::ptrdiff_t o = r * len;
+        const S* __restrict xr = x.data.data() + o;
+        const S* __restrict yr = y.data.data() + o;
+        const S* __restrict fa = f;
+        const S* __restrict fb = f + len;
+        const S* __restrict fc = f + 2 * len;
+        S* __restrict gr = grad_x.data.data() + o;
+        for (std::ptrdiff_t j = 0; j < len; ++j) gr[j] += k * (fa[j] + 2 * xr[j] * fb[j] + yr[j] * fc[j]);
       }
     }
   }
@@ -290,7 +419,10 @@ double photometric_loss(const Image<S>& render, const Image<S>& gt, Image<S>* gr
   const double lambda = cfg.ssim_weight;
   const int H = render.height;
   const std::ptrdiff_t len = static_cast<std::ptrdiff_t>(render.width) * render.channels;
-  if (want_grad) grad_render->reset(render.width, render.height, render.channels);
+  // Every gradient value is written below, so only reshape (no fill) when needed.
+  if (want_grad && (grad_render->width != render.width || grad_render->height != render.height ||
+                    grad_render->channels != render.channels || grad_render->size() != render.size()))
+    grad_render->reset(render.width, render.height, render.channels);
   const S l1_scale = static_cast<S>((1.0 - lambda) / static_cast<double>(render.size()));
   std::vector<double> row_l1(static_cast<std::size_t>(H));
 #pragma omp parallel for schedule(static)
@@ -298,14 +430,21 @@ double photometric_loss(const Image<S>& render, const Image<S>& gt, Image<S>* gr
     const std::ptrdiff_t o = r * len;
     const S* xr = render.data.data() + o;
     const S* yr = gt.data.data() + o;
-    double acc = 0;
-    for (std::ptrdiff_t j = 0; j < len; ++j) acc += static_cast<double>(std::abs(xr[j] - yr[j]));
-    row_l1[static_cast<std::size_t>(r)] = acc;
+    double a0 = 0, a1 = 0, a2 = 0, a3 = 0;  // fixed-order partial sums, as detail::strided_sum
+    std::ptrdiff_t j = 0;
+    for (; j + 4 <= len; j += 4) {
+      a0 += static_cast<double>(std::abs(xr[j] - yr[j]));
+      a1 += static_cast<double>(std::abs(xr[j + 1] - yr[j + 1]));
+      a2 += static_cast<double>(std::abs(xr[j + 2] - yr[j + 2]));
+      a3 += static_cast<double>(std::abs(xr[j + 3] - yr[j + 3]));
+    }
+    for (; j < len; ++j) a0 += static_cast<double>(std::abs(xr[j] - yr[j]));
+    row_l1[static_cast<std::size_t>(r)] = (a0 + a1) + (a2 + a3);
     if (want_grad) {
       S* gr = grad_render->data.data() + o;
-      for (std::ptrdiff_t j = 0; j < len; ++j) {
-        const S d = xr[j] - yr[j];
-        gr[j] = d > 0 ? l1_scale : (d < 0 ? -l1_scale : S(0));
+      for (std::ptrdiff_t i = 0; i < len; ++i) {
+        const S d = xr[i] - yr[i];
+        gr[i] = d > 0 ? l1_scale : (d < 0 ? -l1_scale : S(0));
       }
     }
   }
