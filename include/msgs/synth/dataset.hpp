@@ -184,7 +184,7 @@ inline SynthSummary write_synthetic_dataset(const std::filesystem::path& out_arg
       const Camera<float>& cam = scene.captures[static_cast<std::size_t>(ci)].cameras[bi];
       RenderSettings rs;
       rs.aa = preset.aa;
-      rs.jitter_seed = hash_tuple(opt.seed, 0x1A6EULL, ci, static_cast<int>(b));
+      rs.jitter_seed = frame_jitter_seed(opt.seed, ci, b);
       const Image<float> img = render_band(scene, cam, b, rs);
       const std::string name = frame_file_name(b, ci);
       // RGB frames are 8-bit like the camera's JPEGs; the multispectral frames keep 16 bits.

@@ -32,6 +32,11 @@ struct RenderSettings {
   std::uint64_t jitter_seed = 0;  ///< varies the sub-pixel pattern between images
 };
 
+/// Jitter seed of the image of band `b` in capture `capture` of a dataset generated with `seed`.
+inline std::uint64_t frame_jitter_seed(std::uint64_t seed, int capture, Band b) {
+  return hash_tuple(seed, 0x1A6EULL, capture, static_cast<int>(b));
+}
+
 /// Pixel value a band's camera records for a radiance: the RGB camera writes sRGB-encoded values
 /// (as a JPEG would), the multispectral cameras linear values; both clamped to [0, 1].
 inline float band_value(const Spectrum& radiance, Band b, int channel) {
