@@ -120,11 +120,13 @@ class Adam {
                                   std::to_string(first + count) + ") is outside [0, " + std::to_string(G::bands) +
                                   ")");
     const std::int64_t t = iteration++;
-    if (mask.means) update_flat(params.means, grad.means, exp_avg.means, exp_avg_sq.means, lr_means_at(t), ++steps.means);
+    if (mask.means)
+      update_flat(params.means, grad.means, exp_avg.means, exp_avg_sq.means, lr_means_at(t), ++steps.means);
     if (mask.scales)
       update_flat(params.log_scales, grad.log_scales, exp_avg.log_scales, exp_avg_sq.log_scales, config.lr_scales,
                   ++steps.scales);
-    if (mask.quats) update_flat(params.quats, grad.quats, exp_avg.quats, exp_avg_sq.quats, config.lr_quats, ++steps.quats);
+    if (mask.quats)
+      update_flat(params.quats, grad.quats, exp_avg.quats, exp_avg_sq.quats, config.lr_quats, ++steps.quats);
     if (mask.opacities)
       update_flat(params.opacity_logits, grad.opacity_logits, exp_avg.opacity_logits, exp_avg_sq.opacity_logits,
                   config.lr_opacities, ++steps.opacities);

@@ -1,5 +1,5 @@
 // include/msgs/loss.hpp
-// Training losses and evaluation metrics: 0.8 L1 + 0.2 (1 - SSIM) with its gradient, the scale-ratio regulariser, PSNR, SSIM.
+// Training losses and metrics: 0.8 L1 + 0.2 (1 - SSIM) with its gradient, scale regulariser, PSNR, SSIM.
 #pragma once
 
 #include <algorithm>
@@ -551,8 +551,10 @@ std::vector<double> psnr_per_channel(const Image<S>& a, const Image<S>& b, doubl
       mse[c] += d * d;
     }
   std::vector<double> out(C);
-  for (std::size_t c = 0; c < C; ++c)
-    out[c] = 10.0 * std::log10(max_value * max_value / std::max(P ? mse[c] / static_cast<double>(P) : 0.0, psnr_min_mse));
+  for (std::size_t c = 0; c < C; ++c) {
+    const double m = P ? mse[c] / static_cast<double>(P) : 0.0;
+    out[c] = 10.0 * std::log10(max_value * max_value / std::max(m, psnr_min_mse));
+  }
   return out;
 }
 
