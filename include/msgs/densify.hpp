@@ -1,0 +1,700 @@
+// include/msgs/densify.hpp
+// Adaptive density control: model surgery as a replayable plan, screen-space gradient statistics
+// (one accumulator, or one per band for MSAD), duplicate / split / prune and the opacity reset.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "msgs/gaussian.hpp"
+#include "msgs/schedule.hpp"
+
+namespace msgs {
+
+// ---------------------------------------------------------------------------------------------
+// Model surgery
+// ---------------------------------------------------------------------------------------------
+
+/// A change of the set of Gaussians, written as data so that every per-Gaussian array can follow
+/// it: the model, the optimiser moments, the densification statistics, anything else a caller
+/// keeps in parallel. Output row i copies input row `source[i]`; `fresh[i]` marks a new Gaussian
+/// whose optimiser state must start at zero (apply_zero_fresh). A row whose source is `none` is
+/// a brand new Gaussian that starts as zeros everywhere; the caller fills it in.
+struct RefinePlan {
+  /// Source index of a row that copies nothing.
+  static constexpr std::uint32_t none = 0xFFFFFFFFu;
+
+  std::size_t input_size = 0;         ///< rows of the array the plan applies to
+  std::vector<std::uint32_t> source;  ///< [M] input row copied into each output row, or `none`
+  std::vector<bool> fresh;            ///< [M] true for new Gaussians (zero optimiser state)
+
+  /// Rows after the plan.
+  std::size_t size() const { return source.size(); }
+  /// Number of new Gaussians.
+  std::size_t fresh_count() const { return static_cast<std::size_t>(std::count(fresh.begin(), fresh.end(), true)); }
+
+  /// Throw std::invalid_argument when the plan is malformed.
+  void validate() const {
+    if (fresh.size() != source.size())
+      throw std::invalid_argument("RefinePlan: source has " + std::to_string(source.size()) + " rows, fresh has " +
+                                  std::to_string(fresh.size()));
+    for (std::size_t i = 0; i < source.size(); ++i) {
+      if (source[i] == none) {
+        if (!fresh[i]) throw std::invalid_argument("RefinePlan: row " + std::to_string(i) + " has no source but is not fresh");
+      } else if (source[i] >= input_size) {
+        throw std::invalid_argument("RefinePlan: row " + std::to_string(i) + " copies input row " +
+                                    std::to_string(source[i]) + " of " + std::to_string(input_size));
+      }
+    }
+  }
+
+  /// Every row kept in place.
+  static RefinePlan identity(std::size_t n) {
+    RefinePlan p = empty_plan(n);
+    for (std::size_t i = 0; i < n; ++i) p.push(i, false);
+    return p;
+  }
+  /// Keep the rows where `keep` is true, in order.
+  static RefinePlan keep(const std::vector<bool>& keep_mask) {
+    RefinePlan p = empty_plan(keep_mask.size());
+    for (std::size_t i = 0; i < keep_mask.size(); ++i)
+      if (keep_mask[i]) p.push(i, false);
+    return p;
+  }
+  /// Remove the rows where `mask` is true, keep the others in order.
+  static RefinePlan remove(const std::vector<bool>& mask) {
+    RefinePlan p = empty_plan(mask.size());
+    for (std::size_t i = 0; i < mask.size(); ++i)
+      if (!mask[i]) p.push(i, false);
+    return p;
+  }
+  /// All rows, then a fresh copy of every masked row appended in order (3DGS clone).
+  static RefinePlan duplicate(const std::vector<bool>& mask) {
+    RefinePlan p = identity(mask.size());
+    for (std::size_t i = 0; i < mask.size(); ++i)
+      if (mask[i]) p.push(i, true);
+    return p;
+  }
+  /// The unmasked rows in order, then `samples` blocks each holding a fresh copy of every masked
+  /// row (block k, masked row j at rest + k * selected + j): the layout of gsplat's split.
+  static RefinePlan split(const std::vector<bool>& mask, int samples) {
+    if (samples < 1) throw std::invalid_argument("RefinePlan::split: samples must be >= 1");
+    RefinePlan p = empty_plan(mask.size());
+    std::vector<std::size_t> sel;
+    for (std::size_t i = 0; i < mask.size(); ++i) {
+      if (mask[i]) sel.push_back(i);
+      else p.push(i, false);
+    }
+    for (int k = 0; k < samples; ++k)
+      for (std::size_t j : sel) p.push(j, true);
+    return p;
+  }
+  /// All `n` rows, then `count` new zero rows for the caller to fill.
+  static RefinePlan append(std::size_t n, std::size_t count) {
+    RefinePlan p = identity(n);
+    for (std::size_t i = 0; i < count; ++i) {
+      p.source.push_back(none);
+      p.fresh.push_back(true);
+    }
+    return p;
+  }
+
+  /// This plan followed by `next` (which must apply to this plan's output) as one plan; a row is
+  /// fresh when either step made it new.
+  RefinePlan then(const RefinePlan& next) const {
+    if (next.input_size != size())
+      throw std::invalid_argument("RefinePlan::then: next plan expects " + std::to_string(next.input_size) +
+                                  " rows, this plan produces " + std::to_string(size()));
+    next.validate();
+    RefinePlan r;
+    r.input_size = input_size;
+    r.source.resize(next.size());
+    r.fresh.resize(next.size());
+    for (std::size_t i = 0; i < next.size(); ++i) {
+      const std::uint32_t s = next.source[i];
+      r.source[i] = s == none ? none : source[s];
+      r.fresh[i] = next.fresh[i] || s == none || fresh[s];
+    }
+    return r;
+  }
+
+ private:
+  static RefinePlan empty_plan(std::size_t n) {
+    if (n >= std::size_t(none)) throw std::invalid_argument("RefinePlan: too many Gaussians for 32-bit row indices");
+    RefinePlan p;
+    p.input_size = n;
+    return p;
+  }
+  void push(std::size_t src, bool is_fresh) {
+    source.push_back(static_cast<std::uint32_t>(src));
+    fresh.push_back(is_fresh);
+  }
+};
+
+namespace detail {
+template <class T>
+void apply_rows_impl(const RefinePlan& plan, std::vector<T>& rows, std::size_t width, bool zero_fresh,
+                     const char* what) {
+  plan.validate();
+  if (rows.size() != plan.input_size * width)
+    throw std::invalid_argument(std::string(what) + ": array has " + std::to_string(rows.size()) + " values, plan expects " +
+                                std::to_string(plan.input_size) + " rows of " + std::to_string(width));
+  std::vector<T> out(plan.size() * width, T(0));  // fresh rows stay zero
+  for (std::size_t i = 0; i < plan.size(); ++i) {
+    const std::uint32_t s = plan.source[i];
+    if (s == RefinePlan::none || (zero_fresh && plan.fresh[i])) continue;
+    std::copy_n(rows.begin() + static_cast<std::ptrdiff_t>(s * width), width,
+                out.begin() + static_cast<std::ptrdiff_t>(i * width));
+  }
+  rows.swap(out);
+}
+
+/// Calls f(array, row width) for every per-Gaussian array of a model.
+template <class G, class S, class F>
+void for_each_array(GaussianModel<G, S>& m, F&& f) {
+  f(m.means, std::size_t(3));
+  f(m.log_scales, std::size_t(3));
+  f(m.quats, std::size_t(4));
+  f(m.opacity_logits, std::size_t(1));
+  f(m.sh, static_cast<std::size_t>(G::sh_floats));
+}
+}  // namespace detail
+
+/// Apply `plan` to a per-Gaussian array of `width` values per row (rows copied, `none` rows zero).
+template <class T>
+void apply_rows(const RefinePlan& plan, std::vector<T>& rows, std::size_t width) {
+  detail::apply_rows_impl(plan, rows, width, false, "apply_rows");
+}
+
+/// Apply `plan` to per-Gaussian optimiser state: surviving rows follow their Gaussian, fresh
+/// rows are zero.
+template <class T>
+void apply_rows_zero_fresh(const RefinePlan& plan, std::vector<T>& rows, std::size_t width) {
+  detail::apply_rows_impl(plan, rows, width, true, "apply_rows_zero_fresh");
+}
+
+/// Apply `plan` to a model: every parameter of output row i is a copy of input row source[i]
+/// (SH of all bands included).
+template <class G, class S>
+void apply(const RefinePlan& plan, GaussianModel<G, S>& model) {
+  model.check_consistent();
+  detail::for_each_array(model, [&](auto& v, std::size_t w) { detail::apply_rows_impl(plan, v, w, false, "apply(model)"); });
+}
+
+/// Apply `plan` to optimiser state stored with the model's layout (Adam's exp_avg, exp_avg_sq):
+/// rows of surviving Gaussians follow them, fresh Gaussians get zeros.
+template <class G, class S>
+void apply_zero_fresh(const RefinePlan& plan, GaussianModel<G, S>& state) {
+  state.check_consistent();
+  detail::for_each_array(state, [&](auto& v, std::size_t w) { detail::apply_rows_impl(plan, v, w, true, "apply_zero_fresh(state)"); });
+}
+
+// ---------------------------------------------------------------------------------------------
+// Configuration
+// ---------------------------------------------------------------------------------------------
+
+/// Every threshold and every step range of adaptive density control. The step fields are
+/// integers so that ScheduleScale can shorten them with the rest of the run (`scaled`).
+/// Scales are relative to the scene scale passed to DensityControl; screen sizes are relative
+/// to max(image width, height).
+struct DensifyConfig {
+  // ---- growth ----
+  double grow_grad2d = 0.0008;      ///< densify where the average screen-space gradient norm (NDC) exceeds this
+  bool absgrad = true;              ///< accumulate Gradients::absgrad instead of Gradients::mean2d
+  bool per_band = true;             ///< MSAD: one accumulator per band, densify on the maximum over bands
+  double grow_scale3d = 0.01;       ///< duplicate where max scale <= this x scene scale, split otherwise
+  double grow_scale2d = 0.05;       ///< also split where the max screen radius exceeds this (step < screen_stop)
+  int split_samples = 2;            ///< Gaussians that replace a split one
+  double split_scale_divisor = 1.6; ///< split samples get scale / this
+
+  // ---- pruning ----
+  double prune_opacity = 0.1;       ///< remove opacity below this
+  double prune_scale3d = 0.5;       ///< after the first opacity reset remove max scale above this x scene scale
+  double prune_scale2d = 0.15;      ///< after the first reset and while step < screen_stop remove screen radius above this
+
+  // ---- opacity reset ----
+  double reset_opacity = 0.2;       ///< opacities are clamped to at most this at every reset
+
+  // ---- step ranges (integers, scaled by ScheduleScale) ----
+  int refine_start = 500;           ///< refine only at step > refine_start
+  int refine_stop = 60000;          ///< from this step on: no statistics, no refinement, no opacity reset
+  int refine_every = 300;           ///< refine at multiples of this
+  int reset_every = 9000;           ///< opacity reset at positive multiples of this (30 x refine_every); 0 = never
+  int screen_stop = 4000;           ///< screen-space split / prune only while step < this; 0 = never
+  int pause_begin = 0;              ///< refinement (and statistics) paused for pause_begin < step <= pause_end
+  int pause_end = 0;                ///< equal to pause_begin: no pause window
+  /// No refinement while step % reset_every < this, i.e. for this many steps after each reset.
+  /// -1 = automatic: num_train_images x images_scale + refine_every (the reference's choice: one
+  /// pass over the training images so that every view has re-rendered the reset opacities).
+  int pause_after_reset = -1;
+  double images_scale = 1.0;        ///< multiplies num_train_images in the automatic pause (scaled() sets it)
+
+  std::uint64_t seed = 0;           ///< seed of the split samples
+
+  /// The multi-spectral implementation's defaults (splatfacto thresholds with absgrad, MSAD
+  /// per-band accumulators) for the recommended 120k-step Joint run: refine every 300 from 500
+  /// to 60000, opacity reset every 30 x 300 steps to 0.2, prune opacity < 0.1.
+  static DensifyConfig msad() { return DensifyConfig{}; }
+
+  /// gsplat's DefaultStrategy / 3DGS: threshold 0.0002 on the plain (non-abs) gradient with one
+  /// accumulator, refine every 100 from 500 to 15000, prune opacity < 0.005, reset every 3000
+  /// to 0.01, prune scale > 0.1 after the first reset, no screen-space rules, no pause after resets.
+  static DensifyConfig gsplat_default() {
+    DensifyConfig c;
+    c.grow_grad2d = 0.0002;
+    c.absgrad = false;
+    c.per_band = false;
+    c.grow_scale3d = 0.01;
+    c.grow_scale2d = 0.05;
+    c.prune_opacity = 0.005;
+    c.prune_scale3d = 0.1;
+    c.prune_scale2d = 0.15;
+    c.reset_opacity = 0.01;
+    c.refine_start = 500;
+    c.refine_stop = 15000;
+    c.refine_every = 100;
+    c.reset_every = 3000;
+    c.screen_stop = 0;
+    c.pause_after_reset = 0;
+    return c;
+  }
+
+  /// Every step field multiplied by `s`. reset_every keeps its ratio to refine_every when it was a
+  /// multiple of it, so resets still land on refinement steps after rounding.
+  DensifyConfig scaled(const ScheduleScale& s) const {
+    s.validate();
+    DensifyConfig r = *this;
+    r.refine_start = s(refine_start);
+    r.refine_stop = s(refine_stop);
+    r.refine_every = s(refine_every);
+    if (reset_every > 0 && refine_every > 0 && reset_every % refine_every == 0)
+      r.reset_every = (reset_every / refine_every) * r.refine_every;
+    else
+      r.reset_every = s(reset_every);
+    r.screen_stop = s(screen_stop);
+    r.pause_begin = s(pause_begin);
+    r.pause_end = s(pause_end);
+    if (pause_after_reset > 0) r.pause_after_reset = s(pause_after_reset);
+    r.images_scale = images_scale * s.factor;
+    return r;
+  }
+
+  /// Steps without refinement after each opacity reset for a dataset of `num_train_images`.
+  int pause_after_reset_for(int num_train_images) const {
+    if (pause_after_reset >= 0) return pause_after_reset;
+    return static_cast<int>(std::lround(double(std::max(num_train_images, 0)) * images_scale)) + refine_every;
+  }
+
+  /// Throw std::invalid_argument naming the first field out of range.
+  void validate() const {
+    auto bad = [](const std::string& field, const std::string& expected) {
+      throw std::invalid_argument("DensifyConfig: " + field + " must be " + expected);
+    };
+    auto finite_nonneg = [&](double v, const char* f) {
+      if (!(std::isfinite(v) && v >= 0.0)) bad(f, "finite and >= 0, got " + std::to_string(v));
+    };
+    finite_nonneg(grow_grad2d, "grow_grad2d");
+    finite_nonneg(grow_scale3d, "grow_scale3d");
+    finite_nonneg(grow_scale2d, "grow_scale2d");
+    finite_nonneg(prune_scale3d, "prune_scale3d");
+    finite_nonneg(prune_scale2d, "prune_scale2d");
+    if (split_samples < 1) bad("split_samples", ">= 1");
+    if (!(std::isfinite(split_scale_divisor) && split_scale_divisor > 0.0)) bad("split_scale_divisor", "finite and > 0");
+    if (!(prune_opacity >= 0.0 && prune_opacity < 1.0)) bad("prune_opacity", "in [0, 1)");
+    if (!(reset_opacity > 0.0 && reset_opacity < 1.0)) bad("reset_opacity", "in (0, 1)");
+    if (refine_every < 1) bad("refine_every", ">= 1");
+    if (refine_start < 0) bad("refine_start", ">= 0");
+    if (refine_stop < 0) bad("refine_stop", ">= 0");
+    if (reset_every < 0) bad("reset_every", ">= 0");
+    if (screen_stop < 0) bad("screen_stop", ">= 0");
+    if (pause_begin < 0 || pause_end < pause_begin) bad("pause_begin/pause_end", "0 <= pause_begin <= pause_end");
+    if (pause_after_reset < -1) bad("pause_after_reset", ">= 0 or -1 (automatic)");
+    if (!(std::isfinite(images_scale) && images_scale > 0.0)) bad("images_scale", "finite and > 0");
+  }
+};
+
+// ---------------------------------------------------------------------------------------------
+// Statistics
+// ---------------------------------------------------------------------------------------------
+
+/// Per-Gaussian, per-band accumulators of the screen-space gradient. The gradient w.r.t. the
+/// projected mean in pixels is multiplied by (W/2, H/2), which makes it the gradient w.r.t. the
+/// NDC position as in gsplat, so thresholds do not depend on the resolution.
+class DensityStats {
+ public:
+  DensityStats() = default;
+  DensityStats(std::size_t n, int bands) { reset(n, bands); }
+
+  /// Zero every accumulator for `n` Gaussians and `bands` bands.
+  void reset(std::size_t n, int bands) {
+    if (bands < 1) throw std::invalid_argument("DensityStats: bands must be >= 1, got " + std::to_string(bands));
+    n_ = n;
+    bands_ = bands;
+    grad_.assign(n * static_cast<std::size_t>(bands), 0.0f);
+    count_.assign(n * static_cast<std::size_t>(bands), 0u);
+    radius_.assign(n, 0.0f);
+  }
+  /// Zero every accumulator for `n` Gaussians, same bands.
+  void reset(std::size_t n) { reset(n, bands_); }
+
+  /// Gaussians tracked.
+  std::size_t size() const { return n_; }
+  /// Accumulator bands.
+  int bands() const { return bands_; }
+
+  /// Accumulate one rendered view of `band`. `grad2d` [N, 2] is dL/d(projected mean) in pixels
+  /// (or its absgrad variant), `radii` [N, 2] the screen half-extents in pixels ({0, 0} = not
+  /// visible). A Gaussian counts as visible when both radii are > 0 (gsplat). Non-finite
+  /// gradients are skipped rather than poisoning the running sum.
+  template <class S>
+  void add(int band, const std::vector<S>& grad2d, const std::vector<std::int32_t>& radii, int width, int height) {
+    if (band < 0 || band >= bands_)
+      throw std::invalid_argument("DensityStats::add: band " + std::to_string(band) + " outside [0, " +
+                                  std::to_string(bands_) + ")");
+    if (grad2d.size() != 2 * n_ || radii.size() != 2 * n_)
+      throw std::invalid_argument("DensityStats::add: expected grad2d and radii of " + std::to_string(n_) +
+                                  " x 2 values, got " + std::to_string(grad2d.size()) + " and " + std::to_string(radii.size()));
+    if (width < 1 || height < 1) throw std::invalid_argument("DensityStats::add: image size must be >= 1");
+    const double sx = 0.5 * width, sy = 0.5 * height;
+    const double inv_size = 1.0 / double(std::max(width, height));
+    const auto b = static_cast<std::size_t>(band), nb = static_cast<std::size_t>(bands_);
+    for (std::size_t i = 0; i < n_; ++i) {
+      const std::int32_t rx = radii[2 * i], ry = radii[2 * i + 1];
+      if (rx <= 0 || ry <= 0) continue;
+      const double gx = double(grad2d[2 * i]) * sx, gy = double(grad2d[2 * i + 1]) * sy;
+      const double norm = std::sqrt(gx * gx + gy * gy);
+      if (!std::isfinite(norm)) continue;
+      grad_[i * nb + b] += static_cast<float>(norm);
+      count_[i * nb + b] += 1u;
+      radius_[i] = std::max(radius_[i], static_cast<float>(double(std::max(rx, ry)) * inv_size));
+    }
+  }
+
+  /// Accumulated gradient norm of Gaussian i in `band`.
+  float grad_sum(std::size_t i, int band) const { return grad_[i * std::size_t(bands_) + std::size_t(band)]; }
+  /// Views of `band` in which Gaussian i was visible.
+  std::uint32_t count(std::size_t i, int band) const { return count_[i * std::size_t(bands_) + std::size_t(band)]; }
+  /// Average gradient norm of Gaussian i in `band`: sum / max(count, 1).
+  double average(std::size_t i, int band) const {
+    return double(grad_sum(i, band)) / double(std::max<std::uint32_t>(count(i, band), 1u));
+  }
+  /// Largest per-band average of Gaussian i (MSAD's criterion; with one band, the average).
+  double max_average(std::size_t i) const {
+    double m = 0.0;
+    for (int b = 0; b < bands_; ++b) m = std::max(m, average(i, b));
+    return m;
+  }
+  /// Largest screen radius of Gaussian i seen since the last reset, relative to max(W, H).
+  float max_radius(std::size_t i) const { return radius_[i]; }
+  /// [N] the same for all Gaussians.
+  const std::vector<float>& max_radii() const { return radius_; }
+
+ private:
+  std::size_t n_ = 0;
+  int bands_ = 1;
+  std::vector<float> grad_;            // [N, B] sum of NDC gradient norms over visible views
+  std::vector<std::uint32_t> count_;   // [N, B] visible views
+  std::vector<float> radius_;          // [N]    max screen radius / max(W, H)
+};
+
+// ---------------------------------------------------------------------------------------------
+// Density control
+// ---------------------------------------------------------------------------------------------
+
+/// What one refinement did, for logging.
+struct RefineCounts {
+  std::size_t duplicated = 0;  ///< Gaussians cloned (each adds one)
+  std::size_t split = 0;       ///< Gaussians replaced by split_samples samples
+  std::size_t pruned = 0;      ///< Gaussians removed (after growth)
+};
+
+/// Outcome of DensityControl::step_post_backward.
+struct DensifyReport {
+  bool refined = false;        ///< grow + prune ran at this step
+  bool opacity_reset = false;  ///< opacities were reset at this step
+  RefineCounts counts;
+  std::size_t before = 0;      ///< Gaussians before the step
+  std::size_t after = 0;       ///< Gaussians after the step
+  RefinePlan plan;             ///< the surgery (identity when nothing happened), for further parallel arrays
+};
+
+/// Adaptive density control of 3DGS as gsplat's DefaultStrategy and the multi-spectral
+/// implementation run it (REFERENCE §5). After each backward the caller feeds the screen-space
+/// gradients (`observe`), then calls `step_post_backward`, passing the optimiser moments kept
+/// with the model's layout so that they follow every change:
+///
+///     dc.observe_gradients(step, band, grads, raster.radii(), cam.width, cam.height);
+///     auto rep = dc.step_post_backward(step, model, adam.exp_avg, adam.exp_avg_sq);
+///
+/// Everything is deterministic: split samples are hashes of (seed, step, row, sample, axis).
+class DensityControl {
+ public:
+  /// `num_bands`: bands a training step may render (accumulators per band when cfg.per_band);
+  /// `num_train_images`: for the automatic pause after resets; `scene_scale`: multiplies the 3-D
+  /// scale thresholds.
+  DensityControl(DensifyConfig cfg, int num_bands, int num_train_images, double scene_scale = 1.0)
+      : cfg_(std::move(cfg)), num_bands_(num_bands), scene_scale_(scene_scale) {
+    cfg_.validate();
+    if (num_bands < 1) throw std::invalid_argument("DensityControl: num_bands must be >= 1");
+    if (num_train_images < 0) throw std::invalid_argument("DensityControl: num_train_images must be >= 0");
+    if (!(std::isfinite(scene_scale) && scene_scale > 0.0))
+      throw std::invalid_argument("DensityControl: scene_scale must be finite and > 0");
+    pause_after_reset_ = cfg_.pause_after_reset_for(num_train_images);
+    if (cfg_.reset_every > 0 && pause_after_reset_ >= cfg_.reset_every)
+      throw std::invalid_argument("DensityControl: the pause after an opacity reset (" + std::to_string(pause_after_reset_) +
+                                  " steps) is not shorter than reset_every (" + std::to_string(cfg_.reset_every) +
+                                  "): densification would never run");
+    stats_.reset(0, cfg_.per_band ? num_bands : 1);
+  }
+
+  const DensifyConfig& config() const { return cfg_; }
+  const DensityStats& stats() const { return stats_; }
+  double scene_scale() const { return scene_scale_; }
+  int num_bands() const { return num_bands_; }
+  /// Steps after each opacity reset without refinement (resolved from num_train_images).
+  int pause_after_reset() const { return pause_after_reset_; }
+
+  /// Whether statistics are collected at `step`: before refine_stop and outside the pause window
+  /// (a pause exists to let new bands settle; their first gradients should not drive growth).
+  bool accumulates_at(long long step) const { return step < cfg_.refine_stop && !paused_at(step); }
+
+  /// Whether `step` grows and prunes: step > refine_start, a multiple of refine_every, before
+  /// refine_stop, outside the pause window, and step % reset_every >= pause_after_reset (gsplat's
+  /// rule: not within that many steps after an opacity reset).
+  bool refines_at(long long step) const {
+    if (step <= cfg_.refine_start || step >= cfg_.refine_stop) return false;
+    if (step % cfg_.refine_every != 0 || paused_at(step)) return false;
+    return cfg_.reset_every <= 0 || step % cfg_.reset_every >= pause_after_reset_;
+  }
+
+  /// Whether `step` resets opacities: a positive multiple of reset_every before refine_stop.
+  bool resets_opacity_at(long long step) const {
+    return cfg_.reset_every > 0 && step > 0 && step % cfg_.reset_every == 0 && step < cfg_.refine_stop;
+  }
+
+  /// Forget the statistics, for a model of `n` Gaussians changed outside this class.
+  void reset_stats(std::size_t n) { stats_.reset(n); }
+
+  /// Accumulate the screen-space gradients of one rendered view. `grad2d` [N, 2] must be
+  /// Gradients::absgrad when config().absgrad, else Gradients::mean2d; `radii` [N, 2] the
+  /// rasteriser's radii; `band` the band the view belongs to (ignored without per-band stats).
+  template <class S>
+  void observe(long long step, int band, const std::vector<S>& grad2d, const std::vector<std::int32_t>& radii, int width,
+               int height) {
+    if (band < 0 || band >= num_bands_)
+      throw std::invalid_argument("DensityControl::observe: band " + std::to_string(band) + " outside [0, " +
+                                  std::to_string(num_bands_) + ")");
+    if (!accumulates_at(step)) return;
+    const std::size_t n = grad2d.size() / 2;
+    if (stats_.size() != n) {
+      if (stats_.size() != 0)
+        throw std::invalid_argument("DensityControl::observe: gradients for " + std::to_string(n) +
+                                    " Gaussians, statistics for " + std::to_string(stats_.size()) +
+                                    "; call reset_stats(n) after changing the model outside DensityControl");
+      stats_.reset(n);  // first view since construction
+    }
+    stats_.add(cfg_.per_band ? band : 0, grad2d, radii, width, height);
+  }
+
+  /// `observe` with the gradient array chosen from a rasteriser Gradients object (anything with
+  /// `mean2d` and `absgrad` members) according to config().absgrad.
+  template <class Grads>
+  void observe_gradients(long long step, int band, const Grads& grads, const std::vector<std::int32_t>& radii, int width,
+                         int height) {
+    observe(step, band, cfg_.absgrad ? grads.absgrad : grads.mean2d, radii, width, height);
+  }
+
+  /// The hook after each backward (and after `observe`): refines when `refines_at(step)`, then
+  /// resets opacities when `resets_opacity_at(step)`. `states` are per-Gaussian optimiser arrays
+  /// with the model's layout (GaussianModel<G, T>); they follow the plan with zeros for new rows,
+  /// and their opacity entries are zeroed at a reset, as the references do with Adam's moments.
+  template <class G, class S, class... States>
+  DensifyReport step_post_backward(long long step, GaussianModel<G, S>& model, States&... states) {
+    DensifyReport rep;
+    rep.before = model.size();
+    rep.plan = RefinePlan::identity(model.size());
+    // Check every state before touching anything, so a mismatch cannot leave half-applied surgery.
+    [[maybe_unused]] auto check = [&](const auto& st) {
+      st.check_consistent();
+      if (st.size() != model.size())
+        throw std::invalid_argument("DensityControl::step_post_backward: optimiser state holds " + std::to_string(st.size()) +
+                                    " Gaussians, model " + std::to_string(model.size()));
+    };
+    (check(states), ...);
+    if (refines_at(step)) {
+      rep.plan = refine(step, model, rep.counts);
+      (apply_zero_fresh(rep.plan, states), ...);
+      rep.refined = true;
+    }
+    if (resets_opacity_at(step)) {
+      reset_opacity(model, states...);
+      rep.opacity_reset = true;
+    }
+    rep.after = model.size();
+    return rep;
+  }
+
+  /// Grow and prune now (whatever the schedule says; `step` selects the screen-space and
+  /// after-reset rules and seeds the split samples), then zero the statistics. Returns the plan,
+  /// which the caller applies to every other per-Gaussian array (apply_zero_fresh for optimiser
+  /// state). Order as gsplat: duplicate (copies appended), split (originals removed, samples
+  /// appended), then prune on the grown set; copies and samples inherit screen radii.
+  template <class G, class S>
+  RefinePlan refine(long long step, GaussianModel<G, S>& model, RefineCounts& counts) {
+    model.check_consistent();
+    const std::size_t n = model.size();
+    if (stats_.size() != n) {
+      if (stats_.size() != 0)
+        throw std::invalid_argument("DensityControl::refine: statistics for " + std::to_string(stats_.size()) +
+                                    " Gaussians, model has " + std::to_string(n));
+      stats_.reset(n);  // nothing observed yet: all statistics are zero
+    }
+    const bool screen = step < cfg_.screen_stop;
+    const bool after_reset = cfg_.reset_every > 0 && step > cfg_.reset_every;
+    counts = {};
+
+    // ---- growth decisions on the current set ----
+    std::vector<bool> dup(n, false), split(n, false);
+    const double small_limit = cfg_.grow_scale3d * scene_scale_;
+    for (std::size_t i = 0; i < n; ++i) {
+      const bool high = stats_.max_average(i) > cfg_.grow_grad2d;
+      const bool small = max_scale(model, i) <= small_limit;
+      dup[i] = high && small;
+      // gsplat ORs the screen rule in regardless of size: a small, high-gradient Gaussian that is
+      // also large on screen is cloned and split (three Gaussians).
+      split[i] = (high && !small) || (screen && double(stats_.max_radius(i)) > cfg_.grow_scale2d);
+      counts.duplicated += dup[i];
+      counts.split += split[i];
+    }
+
+    // ---- duplicate: copies appended; they are not split ----
+    const RefinePlan p_dup = RefinePlan::duplicate(dup);
+    apply(p_dup, model);
+    split.resize(model.size(), false);
+
+    // ---- split: originals removed, samples appended in blocks ----
+    const RefinePlan p_split = RefinePlan::split(split, cfg_.split_samples);
+    std::vector<std::size_t> sel;
+    for (std::size_t i = 0; i < split.size(); ++i)
+      if (split[i]) sel.push_back(i);
+    // Sample offsets first, from the parents (rows of the duplicated model).
+    std::vector<double> offsets(sel.size() * static_cast<std::size_t>(cfg_.split_samples) * 3);  // [K, sel, 3]
+    for (std::size_t j = 0; j < sel.size(); ++j)
+      for (int k = 0; k < cfg_.split_samples; ++k)
+        sample_offset(model, sel[j], step, k, &offsets[(static_cast<std::size_t>(k) * sel.size() + j) * 3]);
+    apply(p_split, model);
+    const std::size_t rest = model.size() - sel.size() * static_cast<std::size_t>(cfg_.split_samples);
+    const double dlog = std::log(cfg_.split_scale_divisor);
+    for (std::size_t c = 0; c < sel.size() * static_cast<std::size_t>(cfg_.split_samples); ++c) {
+      const std::size_t row = rest + c;
+      for (int a = 0; a < 3; ++a) {
+        auto& m = model.means[row * 3 + std::size_t(a)];
+        m = static_cast<S>(double(m) + offsets[c * 3 + std::size_t(a)]);
+        auto& ls = model.log_scales[row * 3 + std::size_t(a)];
+        ls = static_cast<S>(double(ls) - dlog);
+      }
+    }
+    RefinePlan plan = p_dup.then(p_split);
+
+    // ---- prune on the grown set ----
+    std::vector<float> radius = stats_.max_radii();  // [N] follows the growth: copies inherit
+    apply_rows(plan, radius, 1);
+    const std::size_t m = model.size();
+    std::vector<bool> prune(m, false);
+    const double big_limit = cfg_.prune_scale3d * scene_scale_;
+    for (std::size_t i = 0; i < m; ++i) {
+      const double o = sigmoid(double(model.opacity_logits[i]));
+      bool p = o < cfg_.prune_opacity || !row_finite(model, i);  // a NaN row would never recover
+      if (after_reset) {
+        p = p || max_scale(model, i) > big_limit;
+        if (screen) p = p || double(radius[i]) > cfg_.prune_scale2d;
+      }
+      prune[i] = p;
+      counts.pruned += p;
+    }
+    const RefinePlan p_prune = RefinePlan::remove(prune);
+    apply(p_prune, model);
+    plan = plan.then(p_prune);
+
+    stats_.reset(model.size());
+    return plan;
+  }
+
+  /// Clamp every opacity to at most config().reset_opacity (the logit is stored; NaN becomes the
+  /// cap) and zero the opacity entries of the given optimiser states.
+  template <class G, class S, class... States>
+  void reset_opacity(GaussianModel<G, S>& model, States&... states) {
+    const double v = cfg_.reset_opacity;
+    const S cap = static_cast<S>(std::log(v / (1.0 - v)));
+    for (auto& l : model.opacity_logits)
+      if (!(l <= cap)) l = cap;
+    (zero_all(states.opacity_logits), ...);
+  }
+
+ private:
+  bool paused_at(long long step) const { return cfg_.pause_begin < step && step <= cfg_.pause_end; }
+
+  template <class T>
+  static void zero_all(std::vector<T>& v) { std::fill(v.begin(), v.end(), T(0)); }
+
+  static double sigmoid(double x) { return x >= 0 ? 1.0 / (1.0 + std::exp(-x)) : std::exp(x) / (1.0 + std::exp(x)); }
+
+  template <class G, class S>
+  static double max_scale(const GaussianModel<G, S>& m, std::size_t i) {
+    const double l = std::max({double(m.log_scales[3 * i]), double(m.log_scales[3 * i + 1]), double(m.log_scales[3 * i + 2])});
+    return std::exp(l);
+  }
+
+  template <class G, class S>
+  static bool row_finite(const GaussianModel<G, S>& m, std::size_t i) {
+    auto fin = [](const std::vector<S>& v, std::size_t first, std::size_t count) {
+      for (std::size_t k = first; k < first + count; ++k)
+        if (!std::isfinite(double(v[k]))) return false;
+      return true;
+    };
+    const auto nsh = static_cast<std::size_t>(G::sh_floats);
+    return fin(m.means, 3 * i, 3) && fin(m.log_scales, 3 * i, 3) && fin(m.quats, 4 * i, 4) &&
+           fin(m.opacity_logits, i, 1) && fin(m.sh, nsh * i, nsh);
+  }
+
+  /// Offset of split sample k of row i: R (s * z) with z ~ N(0, I) in the Gaussian's local frame.
+  template <class G, class S>
+  void sample_offset(const GaussianModel<G, S>& m, std::size_t i, long long step, int k, double* out) const {
+    double q[4] = {double(m.quats[4 * i]), double(m.quats[4 * i + 1]), double(m.quats[4 * i + 2]), double(m.quats[4 * i + 3])};
+    const double qn = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    if (!(qn > 1e-12) || !std::isfinite(qn)) {
+      q[0] = 1; q[1] = q[2] = q[3] = 0;  // degenerate rotation: sample axis-aligned
+    } else {
+      for (double& c : q) c /= qn;
+    }
+    const double w = q[0], x = q[1], y = q[2], z = q[3];
+    const double R[3][3] = {{1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)},
+                            {2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)},
+                            {2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)}};
+    double local[3];
+    for (int a = 0; a < 3; ++a) {
+      // Clamped exponent: an absurd log-scale still gives a finite (if useless) sample.
+      const double s = std::exp(std::min(double(m.log_scales[3 * i + std::size_t(a)]), 30.0));
+      const auto key = static_cast<std::uint64_t>(k * 3 + a);
+      const double zn = detail::sched_normal(detail::sched_hash(cfg_.seed, 0xD5ULL, step, i, key, 0),
+                                             detail::sched_hash(cfg_.seed, 0xD5ULL, step, i, key, 1));
+      local[a] = std::isfinite(s) ? s * zn : 0.0;
+    }
+    for (int r = 0; r < 3; ++r) out[r] = R[r][0] * local[0] + R[r][1] * local[1] + R[r][2] * local[2];
+  }
+
+  DensifyConfig cfg_;
+  int num_bands_ = 1;
+  double scene_scale_ = 1.0;
+  int pause_after_reset_ = 0;
+  DensityStats stats_;
+};
+
+}  // namespace msgs

@@ -1,0 +1,594 @@
+// tests/test_densify.cpp
+// Tests of msgs/densify.hpp on synthetic screen-space gradients (no rasteriser needed).
+#include <doctest/doctest.h>
+
+#include <Eigen/Geometry>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+#include "msgs/densify.hpp"
+
+using namespace msgs;
+
+namespace {
+
+using G = Gaussian<7, 1>;  // a Joint-like model: seven channels, so row copies must move all of them
+using Model = GaussianModel<G, float>;
+
+double logit(double p) { return std::log(p / (1.0 - p)); }
+double sigmoid(double x) { return 1.0 / (1.0 + std::exp(-x)); }
+
+/// n Gaussians with distinct, recognisable values: small (scale 0.005), opaque (0.9).
+Model make_model(std::size_t n) {
+  Model m(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    for (int a = 0; a < 3; ++a) {
+      m.means[3 * i + a] = float(10 * i + a);
+      m.log_scales[3 * i + a] = float(std::log(0.005));
+    }
+    m.quats[4 * i] = 1.0f;
+    m.opacity_logits[i] = float(logit(0.9));
+    for (int k = 0; k < G::sh_coeffs; ++k)
+      for (int c = 0; c < G::bands; ++c) m.sh_at(i, k, c) = float(1000 * i + 10 * k + c);
+  }
+  return m;
+}
+
+/// Stand-in for the rasteriser's Gradients: the two screen-space arrays densification reads.
+struct FakeGrads {
+  std::vector<float> mean2d;   // [N, 2]
+  std::vector<float> absgrad;  // [N, 2]
+};
+
+/// Screen-space gradients whose NDC norm is `ndc[i]` (along x) for an image of width w.
+FakeGrads grads_with_ndc_norm(const std::vector<double>& ndc, int w) {
+  FakeGrads g;
+  g.mean2d.assign(2 * ndc.size(), 0.0f);
+  for (std::size_t i = 0; i < ndc.size(); ++i) g.mean2d[2 * i] = float(ndc[i] / (0.5 * w));
+  g.absgrad = g.mean2d;
+  return g;
+}
+
+std::vector<std::int32_t> radii_all(std::size_t n, std::int32_t r) { return std::vector<std::int32_t>(2 * n, r); }
+
+/// Row i of `m` equals row j of `ref` in every parameter (SH of all channels included).
+bool same_row(const Model& m, std::size_t i, const Model& ref, std::size_t j) {
+  for (int a = 0; a < 3; ++a)
+    if (m.means[3 * i + a] != ref.means[3 * j + a] || m.log_scales[3 * i + a] != ref.log_scales[3 * j + a]) return false;
+  for (int a = 0; a < 4; ++a)
+    if (m.quats[4 * i + a] != ref.quats[4 * j + a]) return false;
+  if (m.opacity_logits[i] != ref.opacity_logits[j]) return false;
+  for (int k = 0; k < G::sh_coeffs; ++k)
+    for (int c = 0; c < G::bands; ++c)
+      if (m.sh_at(i, k, c) != ref.sh_at(j, k, c)) return false;
+  return true;
+}
+
+bool row_is_zero(const Model& m, std::size_t i) {
+  return same_row(m, i, Model(1), 0);
+}
+
+}  // namespace
+
+TEST_CASE("RefinePlan: remove, duplicate, split, append and composition") {
+  const std::vector<bool> mask = {false, true, false, true};
+  const auto none = RefinePlan::none;
+
+  const RefinePlan rm = RefinePlan::remove(mask);
+  CHECK(rm.source == std::vector<std::uint32_t>{0, 2});
+  CHECK(rm.fresh_count() == 0);
+  CHECK(RefinePlan::keep(mask).source == std::vector<std::uint32_t>{1, 3});
+
+  const RefinePlan dup = RefinePlan::duplicate(mask);
+  CHECK(dup.source == std::vector<std::uint32_t>{0, 1, 2, 3, 1, 3});
+  CHECK(dup.fresh == std::vector<bool>{false, false, false, false, true, true});
+
+  const RefinePlan sp = RefinePlan::split(mask, 2);
+  CHECK(sp.source == std::vector<std::uint32_t>{0, 2, 1, 3, 1, 3});
+  CHECK(sp.fresh == std::vector<bool>{false, false, true, true, true, true});
+
+  const RefinePlan ap = RefinePlan::append(2, 1);
+  CHECK(ap.source == std::vector<std::uint32_t>{0, 1, none});
+  CHECK(ap.fresh == std::vector<bool>{false, false, true});
+
+  // Duplicate, then drop output rows 0 and 5.
+  const RefinePlan both = dup.then(RefinePlan::remove({true, false, false, false, false, true}));
+  CHECK(both.input_size == 4);
+  CHECK(both.source == std::vector<std::uint32_t>{1, 2, 3, 1});
+  CHECK(both.fresh == std::vector<bool>{false, false, false, true});
+  // Freshness survives composition, and a `none` row stays `none`.
+  const RefinePlan c2 = ap.then(RefinePlan::duplicate({false, false, true}));
+  CHECK(c2.source == std::vector<std::uint32_t>{0, 1, none, none});
+  CHECK(c2.fresh == std::vector<bool>{false, false, true, true});
+
+  CHECK_THROWS_AS(dup.then(RefinePlan::identity(4)), std::invalid_argument);
+  RefinePlan bad = RefinePlan::identity(2);
+  bad.source[1] = 2;
+  CHECK_THROWS_AS(bad.validate(), std::invalid_argument);
+  CHECK_THROWS_AS(RefinePlan::split(mask, 0), std::invalid_argument);
+
+  // Plain arrays of any row width follow the same plan.
+  std::vector<int> rows = {0, 1, 10, 11, 20, 21, 30, 31};  // [4, 2]
+  std::vector<int> state = rows;
+  apply_rows(dup, rows, 2);
+  CHECK(rows == std::vector<int>{0, 1, 10, 11, 20, 21, 30, 31, 10, 11, 30, 31});
+  apply_rows_zero_fresh(dup, state, 2);
+  CHECK(state == std::vector<int>{0, 1, 10, 11, 20, 21, 30, 31, 0, 0, 0, 0});
+  std::vector<int> wrong(6);
+  CHECK_THROWS_AS(apply_rows(dup, wrong, 2), std::invalid_argument);
+}
+
+TEST_CASE("apply / apply_zero_fresh move whole rows of the model and of optimiser state") {
+  const Model ref = make_model(3);
+  Model m = ref;
+  Model state = make_model(3);  // stands in for Adam's exp_avg: same layout, recognisable values
+  const RefinePlan plan = RefinePlan::split({false, true, false}, 2).then(RefinePlan::remove({true, false, false, false}));
+  // split -> rows {0, 2, 1', 1''}; remove output 0 -> {2, 1', 1''}
+  REQUIRE(plan.source == std::vector<std::uint32_t>{2, 1, 1});
+  apply(plan, m);
+  apply_zero_fresh(plan, state);
+  REQUIRE(m.size() == 3);
+  m.check_consistent();
+  state.check_consistent();
+  CHECK(same_row(m, 0, ref, 2));
+  CHECK(same_row(m, 1, ref, 1));
+  CHECK(same_row(m, 2, ref, 1));
+  CHECK(same_row(state, 0, ref, 2));
+  CHECK(row_is_zero(state, 1));
+  CHECK(row_is_zero(state, 2));
+
+  Model small = make_model(2);
+  CHECK_THROWS_AS(apply(plan, small), std::invalid_argument);
+}
+
+TEST_CASE("screen-space statistics: NDC scaling, visible views only, max relative radius") {
+  DensityStats st(3, 2);
+  const int W = 200, H = 100;
+  // Gaussian 0: pixel gradient (0.01, 0.02) -> NDC (1, 1), norm sqrt(2). Gaussian 1: one radius 0
+  // (gsplat counts a Gaussian only when both radii are positive). Gaussian 2: culled.
+  st.add(0, std::vector<float>{0.01f, 0.02f, 5.f, 5.f, 7.f, 7.f}, std::vector<std::int32_t>{3, 4, 0, 5, 0, 0}, W, H);
+  CHECK(st.grad_sum(0, 0) == doctest::Approx(std::sqrt(2.0)).epsilon(1e-6));
+  CHECK(st.count(0, 0) == 1);
+  CHECK(st.count(1, 0) == 0);
+  CHECK(st.count(2, 0) == 0);
+  CHECK(st.max_radius(0) == doctest::Approx(4.0 / 200.0));
+  CHECK(st.max_radius(1) == 0.0f);
+  // A second view of band 0 in which Gaussian 0 is not visible does not dilute its average.
+  st.add(0, std::vector<float>{9.f, 9.f, 0.f, 0.f, 0.f, 0.f}, std::vector<std::int32_t>{0, 0, 0, 0, 0, 0}, W, H);
+  CHECK(st.average(0, 0) == doctest::Approx(std::sqrt(2.0)).epsilon(1e-6));
+  // A view of band 1 with a bigger radius and zero gradient: band 1 average 0, count 1.
+  st.add(1, std::vector<float>{0.f, 0.f, 0.f, 0.f, 0.f, 0.f}, std::vector<std::int32_t>{30, 2, 0, 0, 0, 0}, W, H);
+  CHECK(st.count(0, 1) == 1);
+  CHECK(st.average(0, 1) == 0.0);
+  CHECK(st.max_average(0) == doctest::Approx(std::sqrt(2.0)).epsilon(1e-6));
+  CHECK(st.max_radius(0) == doctest::Approx(30.0 / 200.0));
+  CHECK(st.average(2, 1) == 0.0);  // never seen: sum / max(count, 1) = 0, not NaN
+  // Non-finite gradients are skipped.
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  st.add(1, std::vector<float>{nan, 0.f, 0.f, 0.f, 0.f, 0.f}, std::vector<std::int32_t>{1, 1, 0, 0, 0, 0}, W, H);
+  CHECK(st.count(0, 1) == 1);
+  CHECK(std::isfinite(st.max_average(0)));
+
+  CHECK_THROWS_AS(st.add(2, std::vector<float>(6), std::vector<std::int32_t>(6), W, H), std::invalid_argument);
+  CHECK_THROWS_AS(st.add(0, std::vector<float>(4), std::vector<std::int32_t>(6), W, H), std::invalid_argument);
+  st.reset(1);
+  CHECK(st.size() == 1);
+  CHECK(st.bands() == 2);
+  CHECK(st.count(0, 0) == 0);
+}
+
+TEST_CASE("MSAD densifies on one band's gradient where the averaged default rule does not") {
+  // Five bands visited round-robin; Gaussian 0 has NDC gradient 0.0009 in band 2 only, so its
+  // band-2 average is 0.0009 > 0.0008 (MSAD) while the single average is 0.00018 < 0.0002.
+  const int W = 320, H = 240, bands = 5;
+  const long long step = 600;
+  auto run = [&](DensifyConfig cfg, double& avg) {
+    DensityControl dc(cfg, bands, 10);
+    REQUIRE(dc.refines_at(step));
+    Model m = make_model(2);
+    for (long long t = step - 9; t <= step; ++t) {
+      const int band = static_cast<int>(t % bands);
+      const FakeGrads g = grads_with_ndc_norm({band == 2 ? 0.0009 : 0.0, 0.0}, W);
+      dc.observe_gradients(t, band, g, radii_all(2, 2), W, H);
+    }
+    avg = dc.stats().max_average(0);
+    const DensifyReport rep = dc.step_post_backward(step, m);
+    CHECK(rep.refined);
+    CHECK(rep.counts.split == 0);
+    CHECK(rep.counts.pruned == 0);
+    return rep;
+  };
+  double avg_msad = 0, avg_default = 0;
+  const DensifyReport msad = run(DensifyConfig::msad(), avg_msad);
+  const DensifyReport dflt = run(DensifyConfig::gsplat_default(), avg_default);
+  CHECK(avg_msad == doctest::Approx(0.0009).epsilon(1e-4));
+  CHECK(avg_default == doctest::Approx(0.0009 / bands).epsilon(1e-4));
+  CHECK(msad.counts.duplicated == 1);
+  CHECK(msad.after == 3);
+  CHECK(dflt.counts.duplicated == 0);
+  CHECK(dflt.after == 2);
+}
+
+TEST_CASE("absgrad mode reads Gradients::absgrad, the default mode Gradients::mean2d") {
+  FakeGrads g;
+  g.mean2d = {0.0f, 0.0f};
+  g.absgrad = {0.01f, 0.0f};
+  DensityControl a(DensifyConfig::msad(), 1, 0);
+  DensityControl d(DensifyConfig::gsplat_default(), 1, 0);
+  a.observe_gradients(1, 0, g, radii_all(1, 1), 100, 100);
+  d.observe_gradients(1, 0, g, radii_all(1, 1), 100, 100);
+  CHECK(a.stats().average(0, 0) == doctest::Approx(0.5));
+  CHECK(d.stats().average(0, 0) == 0.0);
+}
+
+TEST_CASE("duplicate where the max scale is small, split where it is large, relative to the scene scale") {
+  Model ref = make_model(2);
+  // Gaussian 1: max scale 0.05 > 0.01 -> split; Gaussian 0: 0.005 -> duplicate.
+  ref.log_scales[3] = float(std::log(0.05));
+  ref.log_scales[4] = ref.log_scales[5] = float(std::log(0.001));
+  auto refine_with = [&](double scene_scale, RefineCounts& counts) {
+    DensityControl dc(DensifyConfig::msad(), 1, 0, scene_scale);
+    dc.observe(600, 0, grads_with_ndc_norm({0.01, 0.01}, 100).absgrad, radii_all(2, 1), 100, 100);
+    Model m = ref;
+    const RefinePlan plan = dc.refine(600, m, counts);
+    CHECK(plan.size() == m.size());
+    CHECK(dc.stats().size() == m.size());
+    return std::make_pair(m, plan);
+  };
+  RefineCounts c1;
+  const auto [m1, p1] = refine_with(1.0, c1);
+  CHECK(c1.duplicated == 1);
+  CHECK(c1.split == 1);
+  CHECK(c1.pruned == 0);
+  REQUIRE(m1.size() == 4);  // g0, its copy, two samples of g1
+  CHECK(p1.source == std::vector<std::uint32_t>{0, 0, 1, 1});
+  CHECK(p1.fresh == std::vector<bool>{false, true, true, true});
+  CHECK(same_row(m1, 0, ref, 0));
+  CHECK(same_row(m1, 1, ref, 0));  // a clone is an exact copy
+  for (std::size_t r : {2u, 3u}) {
+    CHECK(m1.log_scales[3 * r] == doctest::Approx(std::log(0.05 / 1.6)).epsilon(1e-6));
+    CHECK(m1.opacity_logits[r] == ref.opacity_logits[1]);
+    for (int k = 0; k < G::sh_coeffs; ++k)
+      for (int c = 0; c < G::bands; ++c) CHECK(m1.sh_at(r, k, c) == ref.sh_at(1, k, c));
+  }
+  // With scene scale 10 the limit is 0.1: both are duplicated.
+  RefineCounts c10;
+  const auto [m10, p10] = refine_with(10.0, c10);
+  CHECK(c10.duplicated == 2);
+  CHECK(c10.split == 0);
+  CHECK(p10.source == std::vector<std::uint32_t>{0, 1, 0, 1});
+  // Below the threshold nothing grows.
+  DensityControl quiet(DensifyConfig::msad(), 1, 0);
+  quiet.observe(600, 0, grads_with_ndc_norm({0.0007, 0.0007}, 100).absgrad, radii_all(2, 1), 100, 100);
+  Model m = ref;
+  RefineCounts cq;
+  quiet.refine(600, m, cq);
+  CHECK(cq.duplicated + cq.split + cq.pruned == 0);
+  CHECK(m.size() == 2);
+}
+
+TEST_CASE("split samples keep scale / 1.6 and are distributed as the parent Gaussian") {
+  const std::size_t n = 3000;
+  Model ref(n);
+  const double s[3] = {0.2, 0.05, 0.1};
+  // A non-normalised stored quaternion: the sample must use the normalised rotation.
+  const double qw = 0.8, qx = 0.3, qy = -0.4, qz = 0.5;
+  for (std::size_t i = 0; i < n; ++i) {
+    for (int a = 0; a < 3; ++a) {
+      ref.means[3 * i + a] = float(a + 1);
+      ref.log_scales[3 * i + a] = float(std::log(s[a]));
+    }
+    ref.quats[4 * i] = float(2 * qw);
+    ref.quats[4 * i + 1] = float(2 * qx);
+    ref.quats[4 * i + 2] = float(2 * qy);
+    ref.quats[4 * i + 3] = float(2 * qz);
+    ref.opacity_logits[i] = float(logit(0.7));
+  }
+  auto split_all = [&](std::uint64_t seed) {
+    DensifyConfig cfg = DensifyConfig::msad();
+    cfg.seed = seed;
+    DensityControl dc(cfg, 1, 0);
+    dc.observe(900, 0, std::vector<float>(2 * n, 1.0f), radii_all(n, 1), 100, 100);
+    Model m = ref;
+    RefineCounts c;
+    dc.refine(900, m, c);
+    CHECK(c.split == n);
+    CHECK(c.duplicated == 0);
+    return m;
+  };
+  const Model m = split_all(1);
+  REQUIRE(m.size() == 2 * n);
+  // Independent reference for the rotation.
+  const Eigen::Matrix3d R = Eigen::Quaterniond(qw, qx, qy, qz).normalized().toRotationMatrix();
+  const Eigen::Vector3d mu(1, 2, 3);
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d sum2 = Eigen::Matrix3d::Zero();
+  double max_abs = 0;
+  for (std::size_t r = 0; r < m.size(); ++r) {
+    for (int a = 0; a < 3; ++a) CHECK(m.log_scales[3 * r + a] == doctest::Approx(std::log(s[a] / 1.6)).epsilon(1e-5));
+    CHECK(m.opacity_logits[r] == ref.opacity_logits[0]);
+    const Eigen::Vector3d x(m.means[3 * r], m.means[3 * r + 1], m.means[3 * r + 2]);
+    Eigen::Vector3d z = R.transpose() * (x - mu);  // back to the local frame
+    for (int a = 0; a < 3; ++a) z[a] /= s[a];      // in units of the parent's standard deviations
+    sum += z;
+    sum2 += z * z.transpose();
+    max_abs = std::max(max_abs, z.cwiseAbs().maxCoeff());
+  }
+  const double N = double(m.size());
+  const Eigen::Vector3d mean = sum / N;
+  const Eigen::Matrix3d cov = sum2 / N - mean * mean.transpose();
+  for (int a = 0; a < 3; ++a) {
+    CHECK(std::abs(mean[a]) < 0.06);              // 6000 samples: standard error 0.013
+    CHECK(cov(a, a) == doctest::Approx(1.0).epsilon(0.08));
+    for (int b = 0; b < a; ++b) CHECK(std::abs(cov(a, b)) < 0.06);  // axes independent
+  }
+  CHECK(max_abs < 6.0);  // near the mean
+  // The two samples of a parent differ (independent draws).
+  CHECK(m.means[0] != m.means[3 * n]);
+  // Deterministic for a seed, different across seeds.
+  const Model again = split_all(1);
+  CHECK(again.means == m.means);
+  const Model other = split_all(2);
+  CHECK(other.means != m.means);
+}
+
+TEST_CASE("prune by opacity (0.1 MSAD, 0.005 default) and by 3-D size after the first reset") {
+  Model ref = make_model(5);
+  ref.opacity_logits[0] = float(logit(0.05));   // below 0.1, above 0.005
+  ref.opacity_logits[1] = float(logit(0.003));  // below both
+  ref.log_scales[6] = float(std::log(0.6));     // g2: larger than 0.5 (and 0.1)
+  ref.log_scales[9] = float(std::log(0.3));     // g3: between 0.1 and 0.5
+  ref.means[12] = std::numeric_limits<float>::quiet_NaN();  // g4: broken row
+  auto pruned_rows = [&](DensifyConfig cfg, long long step) {
+    DensityControl dc(cfg, 1, 0);
+    Model m = ref;
+    RefineCounts c;
+    const RefinePlan plan = dc.refine(step, m, c);  // no statistics: nothing grows
+    CHECK(c.duplicated + c.split == 0);
+    CHECK(c.pruned == ref.size() - m.size());
+    std::vector<std::uint32_t> kept = plan.source;
+    for (std::size_t i = 0; i < m.size(); ++i) CHECK(same_row(m, i, ref, plan.source[i]));
+    return kept;
+  };
+  using V = std::vector<std::uint32_t>;
+  // MSAD: before the first reset (9000) only opacity; after it also scale > 0.5.
+  CHECK(pruned_rows(DensifyConfig::msad(), 600) == V{2, 3});
+  CHECK(pruned_rows(DensifyConfig::msad(), 9300) == V{3});
+  // Default: opacity < 0.005; after the first reset (3000) scale > 0.1.
+  CHECK(pruned_rows(DensifyConfig::gsplat_default(), 600) == V{0, 2, 3});
+  CHECK(pruned_rows(DensifyConfig::gsplat_default(), 3100) == V{0});
+}
+
+TEST_CASE("screen-space split and prune apply only until screen_stop") {
+  // splatfacto-like timing in which the first reset (3000) comes before screen_stop (4000).
+  DensifyConfig cfg = DensifyConfig::msad();
+  cfg.refine_every = 100;
+  cfg.reset_every = 3000;
+  const int W = 1000, H = 500;
+  auto refine_at = [&](long long step, RefineCounts& c) {
+    DensityControl dc(cfg, 1, 0);
+    // Zero gradient; screen radii 200 px (0.2 of max(W, H)), 100 px (0.1), 10 px (0.01).
+    dc.observe(step, 0, std::vector<float>(6, 0.0f), std::vector<std::int32_t>{200, 200, 100, 100, 10, 10}, W, H);
+    Model m = make_model(3);
+    const RefinePlan plan = dc.refine(step, m, c);
+    return plan.source;
+  };
+  using V = std::vector<std::uint32_t>;
+  RefineCounts c;
+  // Step 3500: g0 and g1 are split (radius > 0.05); g0's samples inherit radius 0.2 > 0.15 and are
+  // pruned; g1's samples (0.1) stay.
+  CHECK(refine_at(3500, c) == V{2, 1, 1});
+  CHECK(c.split == 2);
+  CHECK(c.pruned == 2);
+  // Step 4100: screen rules off, nothing happens.
+  CHECK(refine_at(4100, c) == V{0, 1, 2});
+  CHECK(c.split + c.pruned == 0);
+  // Before the first reset the screen rule splits but does not prune (gsplat nests it).
+  CHECK(refine_at(2500, c) == V{2, 0, 1, 0, 1});
+  CHECK(c.pruned == 0);
+}
+
+TEST_CASE("optimiser state rows follow the refine plan with zeros for fresh rows") {
+  Model m = make_model(4);
+  m.log_scales[3] = float(std::log(0.05));     // g1 large -> split
+  m.opacity_logits[3] = float(logit(0.01));    // g3 faint -> pruned
+  const Model ref = m;
+  Model exp_avg = make_model(4), exp_avg_sq = make_model(4);
+  for (auto& v : exp_avg_sq.means) v += 0.5f;  // distinguish the two states
+  const Model ref_avg = exp_avg, ref_sq = exp_avg_sq;
+
+  DensityControl dc(DensifyConfig::msad(), 2, 0);
+  // g0 (small) and g1 (large) have a high gradient in band 1. (Distinct values on purpose: GCC 12.2
+  // with -mavx512f folds the constant {a, a, 0, 0} into a broadcast {a, a, a, a}, a wrong-code bug.)
+  dc.observe(600, 1, grads_with_ndc_norm({0.01, 0.012, 0.0, 0.0}, 64).absgrad, radii_all(4, 1), 64, 64);
+  const DensifyReport rep = dc.step_post_backward(600, m, exp_avg, exp_avg_sq);
+  REQUIRE(rep.refined);
+  CHECK_FALSE(rep.opacity_reset);
+  CHECK(rep.counts.duplicated == 1);
+  CHECK(rep.counts.split == 1);
+  CHECK(rep.counts.pruned == 1);
+  CHECK(rep.before == 4);
+  REQUIRE(rep.after == 5);  // 4 + 1 copy + 1 (split adds one net) - 1 pruned
+  // Order: kept {0, 2}, copy of 0, samples of 1 (3 was pruned).
+  CHECK(rep.plan.source == std::vector<std::uint32_t>{0, 2, 0, 1, 1});
+  CHECK(rep.plan.fresh == std::vector<bool>{false, false, true, true, true});
+  REQUIRE(exp_avg.size() == 5);
+  REQUIRE(exp_avg_sq.size() == 5);
+  for (std::size_t i = 0; i < 5; ++i) {
+    if (rep.plan.fresh[i]) {
+      CHECK(row_is_zero(exp_avg, i));
+      CHECK(row_is_zero(exp_avg_sq, i));
+    } else {
+      CHECK(same_row(exp_avg, i, ref_avg, rep.plan.source[i]));
+      CHECK(same_row(exp_avg_sq, i, ref_sq, rep.plan.source[i]));
+      CHECK(same_row(m, i, ref, rep.plan.source[i]));
+    }
+  }
+  // A state of the wrong size is refused before anything changes.
+  DensityControl dc2(DensifyConfig::msad(), 1, 0);
+  Model m2 = make_model(3), bad_state = make_model(2);
+  dc2.observe(600, 0, grads_with_ndc_norm({0.01, 0.01, 0.01}, 64).absgrad, radii_all(3, 1), 64, 64);
+  CHECK_THROWS_AS(dc2.step_post_backward(600, m2, bad_state), std::invalid_argument);
+  CHECK(m2.size() == 3);
+}
+
+TEST_CASE("opacity reset clamps opacities and zeroes the opacity moments") {
+  DensityControl dc(DensifyConfig::msad(), 1, 100);
+  Model m = make_model(3);
+  m.opacity_logits[1] = float(logit(0.05));  // already below the cap: unchanged
+  m.opacity_logits[2] = std::numeric_limits<float>::quiet_NaN();
+  Model avg = make_model(3);
+  const Model ref_avg = avg;
+  // Step 9000 resets (and does not refine: it lies in the pause after the reset).
+  CHECK(dc.resets_opacity_at(9000));
+  CHECK_FALSE(dc.refines_at(9000));
+  const DensifyReport rep = dc.step_post_backward(9000, m, avg);
+  CHECK(rep.opacity_reset);
+  CHECK_FALSE(rep.refined);
+  CHECK(sigmoid(m.opacity_logits[0]) == doctest::Approx(0.2).epsilon(1e-5));
+  CHECK(sigmoid(m.opacity_logits[1]) == doctest::Approx(0.05).epsilon(1e-5));
+  CHECK(sigmoid(m.opacity_logits[2]) == doctest::Approx(0.2).epsilon(1e-5));  // NaN replaced
+  for (float v : avg.opacity_logits) CHECK(v == 0.0f);
+  CHECK(avg.means == ref_avg.means);  // other moments untouched
+  CHECK(avg.sh == ref_avg.sh);
+
+  // Default: every 3000 steps to 0.01, on a refinement step (no pause after resets).
+  DensityControl d(DensifyConfig::gsplat_default(), 1, 100);
+  Model md = make_model(2);
+  const DensifyReport r2 = d.step_post_backward(3000, md);
+  CHECK(r2.refined);
+  CHECK(r2.opacity_reset);
+  CHECK(sigmoid(md.opacity_logits[0]) == doctest::Approx(0.01).epsilon(1e-4));
+  CHECK_FALSE(d.resets_opacity_at(15000));  // no resets once refinement has stopped
+  CHECK_FALSE(d.resets_opacity_at(0));
+}
+
+TEST_CASE("refine timing: start, period, pause window, after-reset window, stop") {
+  DensifyConfig cfg = DensifyConfig::msad();  // refine every 300 from 500 to 60000, reset every 9000
+  cfg.pause_begin = 29000;
+  cfg.pause_end = 32000;
+  const DensityControl dc(cfg, 5, 100);  // pause after reset: 100 images + 300 = 400 steps
+  CHECK(dc.pause_after_reset() == 400);
+  CHECK_FALSE(dc.refines_at(300));   // not after 500
+  CHECK_FALSE(dc.refines_at(500));
+  CHECK(dc.refines_at(600));
+  CHECK_FALSE(dc.refines_at(700));   // not a multiple of 300
+  CHECK(dc.refines_at(8700));
+  CHECK_FALSE(dc.refines_at(9000));  // reset step
+  CHECK_FALSE(dc.refines_at(9300));  // 300 < 400 steps after the reset
+  CHECK(dc.refines_at(9600));
+  CHECK(dc.refines_at(28800));
+  CHECK_FALSE(dc.refines_at(29100));  // pause window (29000, 32000]
+  CHECK_FALSE(dc.refines_at(31800));
+  CHECK(dc.refines_at(32100));
+  CHECK(dc.refines_at(59700));
+  CHECK_FALSE(dc.refines_at(60000));  // stop
+  CHECK(dc.accumulates_at(29000));
+  CHECK_FALSE(dc.accumulates_at(29001));
+  CHECK_FALSE(dc.accumulates_at(32000));
+  CHECK(dc.accumulates_at(32001));
+  CHECK_FALSE(dc.accumulates_at(60000));
+  CHECK(dc.resets_opacity_at(27000));
+  CHECK_FALSE(dc.resets_opacity_at(63000));
+
+  // Pause boundaries at a finer period: begin is exclusive, end inclusive.
+  DensifyConfig fine = cfg;
+  fine.refine_every = 100;
+  fine.reset_every = 3000;
+  const DensityControl df(fine, 5, 100);  // pause after reset: 200
+  CHECK(df.refines_at(29000));
+  CHECK_FALSE(df.refines_at(32000));
+  CHECK(df.refines_at(32300));
+  CHECK_FALSE(df.refines_at(33100));  // 33000 is a reset: 100 < 200
+
+  // The default has no pause after a reset and stops at 15000.
+  const DensityControl dd(DensifyConfig::gsplat_default(), 1, 100);
+  CHECK(dd.pause_after_reset() == 0);
+  CHECK(dd.refines_at(3000));
+  CHECK(dd.refines_at(14900));
+  CHECK_FALSE(dd.refines_at(15000));
+}
+
+TEST_CASE("a scaled configuration keeps the shape of the schedule") {
+  const DensifyConfig s = DensifyConfig::msad().scaled(ScheduleScale{0.05});
+  CHECK(s.refine_start == 25);
+  CHECK(s.refine_stop == 3000);
+  CHECK(s.refine_every == 15);
+  CHECK(s.reset_every == 450);  // still 30 x refine_every
+  CHECK(s.screen_stop == 200);
+  CHECK(s.pause_after_reset_for(100) == 5 + 15);
+  CHECK(s.grow_grad2d == DensifyConfig::msad().grow_grad2d);  // thresholds are not steps
+  // Rounding would break 30 x refine_every; the ratio is kept instead.
+  const DensifyConfig r = DensifyConfig::msad().scaled(ScheduleScale{0.033});
+  CHECK(r.refine_every == 10);
+  CHECK(r.reset_every == 300);
+  const DensityControl dc(s, 5, 500);  // pause 25 + 15 = 40 < 450
+  CHECK(dc.refines_at(60));
+  CHECK_FALSE(dc.refines_at(465));
+  CHECK(dc.refines_at(495));
+  CHECK(dc.resets_opacity_at(450));
+}
+
+TEST_CASE("statistics reset after each refine and stop accumulating at refine_stop") {
+  DensityControl dc(DensifyConfig::gsplat_default(), 1, 0);
+  Model m = make_model(2);
+  dc.observe(550, 0, std::vector<float>{0.f, 0.f, 1e-6f, 0.f}, radii_all(2, 1), 100, 100);
+  CHECK(dc.stats().count(1, 0) == 1);
+  dc.step_post_backward(600, m);
+  REQUIRE(dc.stats().size() == m.size());
+  for (std::size_t i = 0; i < m.size(); ++i) {
+    CHECK(dc.stats().count(i, 0) == 0);
+    CHECK(dc.stats().grad_sum(i, 0) == 0.0f);
+    CHECK(dc.stats().max_radius(i) == 0.0f);
+  }
+  dc.observe(15000, 0, std::vector<float>{1.f, 1.f, 1.f, 1.f}, radii_all(2, 1), 100, 100);
+  CHECK(dc.stats().count(0, 0) == 0);
+  // Gradients for a model of another size are refused until the statistics are reset.
+  CHECK_THROWS_AS(dc.observe(601, 0, std::vector<float>(6), radii_all(3, 1), 100, 100), std::invalid_argument);
+  dc.reset_stats(3);
+  dc.observe(601, 0, std::vector<float>(6), radii_all(3, 1), 100, 100);
+  CHECK(dc.stats().count(2, 0) == 1);
+  CHECK_THROWS_AS(dc.observe(602, 1, std::vector<float>(6), radii_all(3, 1), 100, 100), std::invalid_argument);
+}
+
+TEST_CASE("presets and validation") {
+  const DensifyConfig a = DensifyConfig::msad();
+  CHECK(a.grow_grad2d == 0.0008);
+  CHECK(a.absgrad);
+  CHECK(a.per_band);
+  CHECK(a.prune_opacity == 0.1);
+  CHECK(a.prune_scale3d == 0.5);
+  CHECK(a.reset_opacity == 0.2);
+  CHECK(a.reset_every == 30 * a.refine_every);
+  CHECK(a.screen_stop == 4000);
+  const DensifyConfig d = DensifyConfig::gsplat_default();
+  CHECK(d.grow_grad2d == 0.0002);
+  CHECK_FALSE(d.absgrad);
+  CHECK_FALSE(d.per_band);
+  CHECK(d.prune_opacity == 0.005);
+  CHECK(d.prune_scale3d == 0.1);
+  CHECK(d.reset_opacity == 0.01);
+  CHECK(d.refine_every == 100);
+  CHECK(d.refine_stop == 15000);
+  CHECK(d.reset_every == 3000);
+  a.validate();
+  d.validate();
+  DensifyConfig bad = a;
+  bad.refine_every = 0;
+  CHECK_THROWS_WITH_AS(bad.validate(), doctest::Contains("refine_every"), std::invalid_argument);
+  bad = a;
+  bad.reset_opacity = 1.0;
+  CHECK_THROWS_WITH_AS(bad.validate(), doctest::Contains("reset_opacity"), std::invalid_argument);
+  bad = a;
+  bad.pause_end = -1;
+  CHECK_THROWS_AS(bad.validate(), std::invalid_argument);
+  // A pause after resets as long as the reset period would silently disable densification.
+  bad = a;
+  bad.pause_after_reset = a.reset_every;
+  CHECK_THROWS_AS(DensityControl(bad, 1, 0), std::invalid_argument);
+  CHECK_THROWS_AS(DensityControl(a, 1, 9000), std::invalid_argument);
+  CHECK_THROWS_AS(DensityControl(a, 0, 10), std::invalid_argument);
+  CHECK_THROWS_AS(DensityControl(a, 1, 10, 0.0), std::invalid_argument);
+}
