@@ -422,7 +422,9 @@ struct DensifyReport {
   RefineCounts counts;
   std::size_t before = 0;      ///< Gaussians before the step
   std::size_t after = 0;       ///< Gaussians after the step
-  RefinePlan plan;             ///< the surgery (identity when nothing happened), for further parallel arrays
+  /// The surgery, for further per-Gaussian arrays; only meaningful when `refined` (otherwise it
+  /// is empty and applying it to a non-empty array throws, rather than silently clearing it).
+  RefinePlan plan;
 };
 
 /// Adaptive density control of 3DGS as gsplat's DefaultStrategy and the multi-spectral
@@ -519,7 +521,6 @@ class DensityControl {
   DensifyReport step_post_backward(long long step, GaussianModel<G, S>& model, States&... states) {
     DensifyReport rep;
     rep.before = model.size();
-    rep.plan = RefinePlan::identity(model.size());
     // Check every state before touching anything, so a mismatch cannot leave half-applied surgery.
     [[maybe_unused]] auto check = [&](const auto& st) {
       st.check_consistent();
