@@ -6,6 +6,8 @@
 #include <fstream>
 #include <random>
 
+#include <stb/stb_image_write.h>
+
 #include "msgs/io/image_io.hpp"
 
 namespace fs = std::filesystem;
@@ -205,4 +207,40 @@ TEST_CASE("downscale: box filter with ceil size") {
   CHECK(d.at(1, 1, 0) == doctest::Approx((12 + 13) / 2.0));
   CHECK(d.at(2, 1, 0) == doctest::Approx(14.0));
   CHECK(downscale(img, 1).data == img.data);
+}
+
+TEST_CASE("8-bit JPEG via stb: values / 255, truncation detected") {
+  const auto dir = scratch("jpeg");
+  const int w = 32, h = 24;
+  std::vector<unsigned char> px(static_cast<std::size_t>(w * h * 3));
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      for (int c = 0; c < 3; ++c) px[std::size_t((y * w + x) * 3 + c)] = static_cast<unsigned char>(40 + 60 * c + 2 * x);
+  const auto p = dir / "a.jpg";
+  REQUIRE(stbi_write_jpg(p.c_str(), w, h, 3, px.data(), 95) != 0);
+  const auto img = read_image(p);
+  REQUIRE(img.width == w);
+  REQUIRE(img.channels == 3);
+  double max_err = 0;
+  for (std::size_t i = 0; i < img.size(); ++i) max_err = std::max(max_err, std::abs(img.data[i] * 255.0 - px[i]));
+  CHECK(max_err < 12);  // lossy, but the same image
+  truncate_file(p, 0.7);
+  try {
+    (void)read_image(p);
+    FAIL("truncated JPEG accepted");
+  } catch (const IoError& e) {
+    CHECK(std::string(e.what()).find("truncated") != std::string::npos);
+  }
+}
+
+TEST_CASE("16-bit PNG with 3 channels and 8-bit grey+alpha keep their channels") {
+  const auto dir = scratch("channels");
+  const auto rgb = random_image(3, 2, 3, 21);
+  write_png16(dir / "rgb.png", rgb);
+  CHECK(read_image(dir / "rgb.png").channels == 3);
+  const auto ga = random_image(3, 2, 2, 22);
+  write_png8(dir / "ga.png", ga);
+  const auto back = read_image(dir / "ga.png");
+  CHECK(back.channels == 2);
+  CHECK(back.data[1] == doctest::Approx(std::round(double(ga.data[1]) * 255.0) / 255.0));
 }
