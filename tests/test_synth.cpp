@@ -4,6 +4,7 @@
 #include <doctest/doctest.h>
 
 #include <msgs/io/bands.hpp>
+#include <msgs/io/dataset.hpp>
 #include <msgs/synth.hpp>
 
 #include <algorithm>
@@ -523,5 +524,42 @@ TEST_CASE("synth: written cameras agree with the ray tracer (pose consistency)")
     INFO(c.path);
     CHECK(off <= mine.size() / 100);
     CHECK(sum / double(mine.size()) < 1e-3);
+  }
+}
+
+TEST_CASE("synth: the dataset loader reads the generated dataset back") {
+  const fs::path& dir = tiny_dataset();
+  const SynthScene s = make_scene("tiny", 1);
+  const int n = s.preset.captures;
+  for (bool orient : {false, true}) {
+    msgs::io::LoadOptions lo;
+    lo.orient_and_center = orient;
+    const msgs::io::Dataset ds = msgs::io::load_dataset(dir, lo);
+    REQUIRE(ds.frames.size() == std::size_t(num_bands * n));
+    CHECK(ds.has_split_file);
+    CHECK(ds.points.size() == std::size_t(s.preset.points));
+    for (Band b : all_bands) {
+      CHECK(ds.frames_of(band_name(b), msgs::io::Split::eval).size() == std::size_t((n + 9) / 10));
+      CHECK(ds.frames_of(band_name(b), msgs::io::Split::train).size() == std::size_t(n - (n + 9) / 10));
+    }
+    // Every loaded camera maps scene points to the same pixels as the generator's camera, after
+    // the loader's world transform.
+    const Eigen::Matrix4f T = ds.transform;
+    for (const auto& f : ds.frames) {
+      const int ci = std::stoi(f.file_path.substr(f.file_path.size() - 9, 5)) - 1;
+      const auto& gen = s.captures.at(std::size_t(ci)).cameras[static_cast<std::size_t>(band_from_name(f.band))];
+      CHECK(f.camera.width == gen.width);
+      CHECK(f.camera.fx == doctest::Approx(gen.fx).epsilon(1e-6));
+      CHECK(f.camera.cy == doctest::Approx(gen.cy).epsilon(1e-6));
+      for (const Vec3f& p : {Vec3f(0.f, 0.f, 0.f), Vec3f(3.f, -2.f, 1.f), Vec3f(-4.f, 5.f, 0.5f)}) {
+        const Vec3f qg = gen.R * p + gen.t;
+        const Vec3f pd = (T * p.homogeneous()).head<3>();
+        const Vec3f ql = f.camera.R * pd + f.camera.t;
+        CHECK(std::abs(qg.x() / qg.z() - ql.x() / ql.z()) * gen.fx < 1e-2f);
+        CHECK(std::abs(qg.y() / qg.z() - ql.y() / ql.z()) * gen.fy < 1e-2f);
+      }
+    }
+    const auto img = msgs::io::load_frame_image(ds, ds.frames[3], 2);
+    CHECK(img.width == (s.preset.ms_width + 1) / 2);
   }
 }

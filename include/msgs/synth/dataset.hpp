@@ -133,7 +133,7 @@ inline std::filesystem::path sibling(const std::filesystem::path& out, const cha
   char buf[32];
   const auto stamp = static_cast<std::uint64_t>(std::chrono::steady_clock::now().time_since_epoch().count());
   std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(hash_mix(stamp, salt)));
-  return out.parent_path() / ("." + out.filename().string() + tag + buf);
+  return out.parent_path() / io::cat(".", out.filename().string(), tag, buf);  // cat: dodges GCC 12 -Wrestrict
 }
 
 }  // namespace detail
@@ -150,7 +150,7 @@ inline SynthSummary write_synthetic_dataset(const std::filesystem::path& out_arg
   if (out.filename().empty()) out = out.parent_path();  // "dir/" -> "dir"
   std::error_code ec;
   if (fs::exists(out, ec) && !opt.overwrite)
-    io::fail(out, "output directory already exists (choose another --out or allow overwriting)");
+    io::fail(out, "output directory already exists (choose another one, or overwrite: --force / SynthOptions::overwrite)");
   fs::create_directories(out.parent_path(), ec);
   if (ec) io::fail(out.parent_path(), io::cat("cannot create parent directory: ", ec.message()));
 
