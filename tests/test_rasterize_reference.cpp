@@ -189,6 +189,16 @@ TEST_CASE("wide depth range: Gaussians behind the camera, near the near plane, o
   check_scene<G, kDepth>(cam, sp, 52);
 }
 
+TEST_CASE("thousands of Gaussians: deep tile lists") {
+  const Camera<float> cam = test_camera<float>(96, 64, 30.0, 40.0, 80.0);
+  SceneParams sp;
+  sp.n = 3000;
+  sp.log_scale_max = std::log(0.4);
+  RenderSettings<float> rs;
+  rs.background = {0.2f, 0.4f, 0.6f};
+  check_scene<Gaussian<3, 3>, kDepthAA>(cam, sp, 71, rs);
+}
+
 TEST_CASE("1x1 image and very opaque scenes (early termination)") {
   using G = Gaussian<3, 0>;
   SceneParams sp;
