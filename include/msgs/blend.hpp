@@ -213,7 +213,6 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
   const int R = BlendRecord::size(nc);
   const detail::TileBounds<S> tb(*in.grid, tile);
   const std::uint64_t begin = in.bins->tile_offset[std::size_t(tile)], end = in.bins->tile_offset[std::size_t(tile) + 1];
-  if (begin == end) return;
 
   alignas(64) S T[TP], t_final_terms[TP], dimg[NC][TP], buf[NC][TP], dD[Depth ? TP : 1], bufd[Depth ? TP : 1];
   alignas(64) std::uint32_t last[TP];
@@ -246,6 +245,7 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
     }
   }
   for (int ch = 0; ch < nc; ++ch) d_background[ch] += bg_grad[ch];
+  if (begin == end) return;  // an empty tile still passes its background gradient (T = 1)
 
   constexpr int NL = BlendRecord::kBase + NC;  // lane accumulators per record entry
   const std::uint32_t* list = in.bins->tile_list.data();

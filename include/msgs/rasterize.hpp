@@ -4,6 +4,7 @@
 // and band subset; optional features (depth, antialiasing) are compile-time and cost nothing off.
 #pragma once
 
+#include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <stdexcept>
@@ -26,6 +27,12 @@ struct RasterOptions {
   bool antialiased = false;
 };
 
+/// Wall-clock seconds spent in each stage, accumulated over calls (reset with `reset()`).
+struct RasterTimings {
+  double project = 0, bin = 0, blend = 0, blend_backward = 0, project_backward = 0;
+  void reset() { *this = RasterTimings{}; }
+};
+
 /// Run-time settings of one render.
 template <class S>
 struct RenderSettings {
@@ -41,7 +48,7 @@ struct Gradients {
   GaussianModel<G, S> model;  ///< dL/d parameters; SH of channels outside the rendered range untouched
   std::vector<S> mean2d;      ///< [N, 2] dL/d(projected mean, pixels)
   std::vector<S> absgrad;     ///< [N, 2] sum over pixels of |per-pixel dL/d(mean2d)|, per component
-  std::vector<S> background;  ///< [band_count] dL/d(background)
+  std::vector<S> background;  ///< [band_count] dL/d(background) per channel (sum them for a broadcast value)
 };
 
 /// Tile rasteriser for models of Gaussian type `G` in scalar `S`. Holds the buffers of the last
@@ -54,10 +61,18 @@ class Rasterizer {
 
   /// Render `model` from `cam`. Returns the image [H, W, band_count].
   const Image<S>& forward(const Model& model, const Camera<S>& cam, const RenderSettings<S>& settings = {}) {
+    using clock = std::chrono::steady_clock;
+    const auto t0 = clock::now();
     prepare(model, cam, settings);
     project_all(model);
+    const auto t1 = clock::now();
     bin_gaussians(visible_, depth_.data(), rects_.data(), grid_, bins_);
+    const auto t2 = clock::now();
     blend_all();
+    const auto t3 = clock::now();
+    timings_.project += std::chrono::duration<double>(t1 - t0).count();
+    timings_.bin += std::chrono::duration<double>(t2 - t1).count();
+    timings_.blend += std::chrono::duration<double>(t3 - t2).count();
     model_ = &model;
     has_forward_ = true;
     return image_;
@@ -73,6 +88,8 @@ class Rasterizer {
       if constexpr (!Opt.depth) throw std::invalid_argument("Rasterizer::backward: d_depth given but depth is off");
       check_grad_image(*d_depth, 1, "d_depth");
     }
+    using clock = std::chrono::steady_clock;
+    const auto t0 = clock::now();
     const Model& model = *model_;
     const std::size_t N = model.size();
     if (grads.model.size() != N) grads.model.resize(N);
@@ -98,12 +115,8 @@ class Rasterizer {
     grads.background.assign(std::size_t(count_), S(0));
     for (int t = 0; t < grid_.count(); ++t)
       for (int ch = 0; ch < count_; ++ch) grads.background[std::size_t(ch)] += bg_partial_[std::size_t(t) * std::size_t(count_) + std::size_t(ch)];
-    if (bg_broadcast_) {  // one background value was broadcast over the channels
-      S sum = S(0);
-      for (S v : grads.background) sum += v;
-      grads.background.assign(1, sum);
-    }
 
+    const auto t1 = clock::now();
     // Per-Gaussian reduction in a fixed (tile) order, then projection and colour backward.
     const std::int64_t V = std::int64_t(bins_.order.size());
     const ProjectCamera& pcam = pcam_;
@@ -141,7 +154,14 @@ class Rasterizer {
       for (int i = 0; i < 4; ++i) grads.model.quats[4 * g + i] = S(gg.quat[i]);
       grads.model.opacity_logits[g] = S(gg.opacity_logit);
     }
+    const auto t2 = clock::now();
+    timings_.blend_backward += std::chrono::duration<double>(t1 - t0).count();
+    timings_.project_backward += std::chrono::duration<double>(t2 - t1).count();
   }
+
+  /// Accumulated stage timings; `timings().reset()` starts over.
+  RasterTimings& timings() { return timings_; }
+  const RasterTimings& timings() const { return timings_; }
 
   const Image<S>& image() const { return image_; }   ///< [H, W, band_count]
   const Image<S>& alpha() const { return alpha_; }   ///< [H, W, 1]: 1 - final transmittance
@@ -200,7 +220,6 @@ class Rasterizer {
     if (sh_degree_ > G::sh_degree)
       throw std::invalid_argument("RenderSettings: sh_degree " + std::to_string(st.sh_degree) + " exceeds the model's " +
                                   std::to_string(G::sh_degree));
-    bg_broadcast_ = st.background.size() == 1 && count_ > 1;
     if (st.background.empty()) background_.assign(std::size_t(count_), S(0));
     else if (st.background.size() == 1) background_.assign(std::size_t(count_), st.background[0]);
     else if (st.background.size() == std::size_t(count_)) background_ = st.background;
@@ -328,9 +347,9 @@ class Rasterizer {
     grads.absgrad.assign(2 * N, S(0));
   }
 
+  RasterTimings timings_;
   // Settings of the last forward.
   int first_ = 0, count_ = 0, sh_degree_ = 0;
-  bool bg_broadcast_ = false;
   std::vector<S> background_;          // [count]
   ProjectCamera pcam_{};
   TileGrid grid_;

@@ -1,0 +1,115 @@
+// examples/cmd_train.cpp
+// `msgs train`: train a strategy on a dataset and write models, configuration and per-band metrics.
+#include <atomic>
+#include <csignal>
+#include <cstdio>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <msgs/io/file.hpp>
+
+#include "commands.hpp"
+#include "experiment.hpp"
+#include "report.hpp"
+
+namespace {
+
+constexpr const char* kUsage =
+    "usage: msgs train --data DIR --out DIR [--strategy NAME] [--scale F] [--sh-degree D]\n"
+    "                  [--bands D,MS_G,...] [--seed S] [--no-orient]\n"
+    "\n"
+    "Train Gaussian splats on a multi-spectral dataset (nerfstudio-style layout) with one of the\n"
+    "paper's strategies, evaluate every band on the eval split and write to DIR:\n"
+    "  model_<key>.ply   one per model (joint, or one per band for separate/split)\n"
+    "  result.json       configuration, per-band metrics, Gaussian counts, time per stage\n"
+    "  metrics.md        the per-band table in the paper's layout\n"
+    "\n"
+    "  --strategy NAME   separate | split | split+extadc | joint[+sig][+specdelay][+extadc|+msad]\n"
+    "                    or joint-optimized (= joint+specdelay+msad, the default)\n"
+    "  --scale F         multiply every iteration count of the paper's schedule (default 0.05:\n"
+    "                    a 6000-step Joint run)\n"
+    "  --sh-degree D     spherical-harmonics degree 0..3 (default 3)\n"
+    "  --bands LIST      train only these bands (comma separated ids)\n"
+    "  --seed S          seed of sampling, backgrounds and initial colours (default 0)\n"
+    "  --no-orient       keep the dataset's coordinates (no re-orientation and centring)\n"
+    "Ctrl-C stops after the current step and still writes the models and metrics.\n";
+
+std::atomic<bool> g_stop{false};
+void on_sigint(int) { g_stop.store(true); }
+
+std::vector<std::string> split_list(const std::string& s) {
+  std::vector<std::string> out;
+  std::string cur;
+  for (char c : s) {
+    if (c == ',') { if (!cur.empty()) out.push_back(cur); cur.clear(); }
+    else cur += c;
+  }
+  if (!cur.empty()) out.push_back(cur);
+  return out;
+}
+
+int run_train(const std::vector<std::string>& argv) {
+  const msgs::cli::Args args(argv, {"data", "out", "strategy", "scale", "sh-degree", "bands", "seed"},
+                             {"help", "no-orient", "quiet"});
+  if (args.flag("help")) { std::fputs(kUsage, stdout); return 0; }
+  if (!args.positional().empty()) throw msgs::cli::UsageError("unexpected argument '" + args.positional()[0] + "'");
+  const std::filesystem::path data = args.require("data"), out = args.require("out");
+  msgs::RunConfig cfg;
+  cfg.strategy = args.get("strategy", "joint+specdelay+msad");
+  cfg.scale = args.number("scale", 0.05);
+  if (!(cfg.scale > 0)) throw msgs::cli::UsageError("--scale must be > 0");
+  const long deg = args.integer("sh-degree", 3);
+  if (deg < 0 || deg > 3) throw msgs::cli::UsageError("--sh-degree must be 0..3");
+  cfg.bands = split_list(args.get("bands"));
+  cfg.train.seed = std::uint64_t(args.integer("seed", 0));
+  cfg.init.seed = std::uint32_t(cfg.train.seed);
+  try {
+    (void)msgs::parse_strategy(cfg.strategy, msgs::ScheduleScale{cfg.scale});
+  } catch (const std::invalid_argument& e) {
+    throw msgs::cli::UsageError(e.what());
+  }
+
+  msgs::io::LoadOptions lo;
+  lo.orient_and_center = !args.flag("no-orient");
+  const msgs::io::Dataset ds = msgs::io::load_dataset(data, lo);
+
+  std::vector<std::string> band_ids = cfg.bands.empty() ? ds.bands() : cfg.bands;
+  const bool quiet = args.flag("quiet");
+  cfg.train.on_progress = [&](const msgs::TrainProgress& p) {
+    if (!quiet) msgs::cli::print_progress(p, band_ids, "");
+  };
+  cfg.train.stop = &g_stop;
+  std::signal(SIGINT, on_sigint);
+
+  std::filesystem::create_directories(out);
+  std::fprintf(stderr, "msgs train: %s on %s (%zu frames, bands", msgs::parse_strategy(cfg.strategy).plan.name.c_str(),
+               data.string().c_str(), ds.frames.size());
+  for (const auto& b : band_ids) std::fprintf(stderr, " %s", b.c_str());
+  std::fprintf(stderr, "), schedule scale %g, SH degree %ld\n", cfg.scale, deg);
+  const msgs::RunResult res = msgs::cli::run_experiment_any(int(deg), ds, cfg, out);
+  std::signal(SIGINT, SIG_DFL);
+
+  nlohmann::json j = msgs::cli::result_json(res);
+  j["data"] = data.string();
+  j["sh_degree"] = deg;
+  j["seed"] = cfg.train.seed;
+  j["transform"] = std::vector<float>(ds.transform.data(), ds.transform.data() + 16);
+  msgs::io::write_text_atomic(out / "result.json", j.dump(2) + "\n");
+  const std::string table = msgs::cli::metrics_markdown(res.metrics);
+  msgs::io::write_text_atomic(out / "metrics.md", "# " + res.strategy + "\n\n" + table);
+  std::printf("\n%s  (%lld steps, %.1f s)\n%s", res.strategy.c_str(), res.steps, res.seconds, table.c_str());
+  std::printf("Gaussians:");
+  for (const auto& [k, n] : res.gaussians) std::printf(" %s %zu", k.c_str(), n);
+  const auto& t = res.times;
+  std::printf("\ntime (s): project %.1f  bin %.1f  blend %.1f  loss %.1f  backward %.1f  adam %.1f  densify %.1f  load %.1f  eval %.1f\n",
+              t.project, t.bin, t.blend, t.loss, t.backward, t.adam, t.densify, t.load, t.eval);
+  std::printf("LPIPS: not computed (needs pretrained network weights, unavailable offline)\n");
+  if (res.interrupted) std::printf("interrupted: models and metrics reflect the state at the stop\n");
+  std::printf("wrote %s\n", (out / "result.json").string().c_str());
+  return res.interrupted ? 130 : 0;
+}
+
+}  // namespace
+
+MSGS_COMMAND("train", "Train a strategy (separate, split, joint+...) on a dataset", run_train);

@@ -1,0 +1,149 @@
+// examples/report.hpp: turning RunResults into JSON, Markdown tables and console lines, shared
+// by `msgs train`, `msgs eval` and `msgs study`.
+#pragma once
+
+#include <cmath>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include <msgs/run.hpp>
+
+namespace msgs::cli {
+
+/// The paper's column order.
+inline const std::vector<std::string>& report_bands() {
+  static const std::vector<std::string> b = {"D", "MS_G", "MS_R", "MS_RE", "MS_NIR"};
+  return b;
+}
+inline std::string band_label(const std::string& id) {
+  if (id == "D") return "RGB";
+  if (id.rfind("MS_", 0) == 0) return id.substr(3);
+  return id;
+}
+
+/// Mean over bands of the per-band means ("All" of the paper's tables: each band weighs the same).
+inline double all_bands_mean(const std::vector<BandMetrics>& m, bool use_psnr) {
+  double s = 0;
+  int n = 0;
+  for (const auto& b : m) {
+    const double v = BandMetrics::mean(use_psnr ? b.psnr : b.ssim);
+    if (std::isfinite(v)) { s += v; ++n; }
+  }
+  return n ? s / n : std::nan("");
+}
+
+inline nlohmann::json metrics_json(const std::vector<BandMetrics>& metrics) {
+  nlohmann::json j = nlohmann::json::object();
+  for (const auto& b : metrics) {
+    nlohmann::json e;
+    e["psnr"] = b.psnr;
+    e["ssim"] = b.ssim;
+    e["psnr_mean"] = BandMetrics::mean(b.psnr);
+    e["psnr_std"] = BandMetrics::stddev(b.psnr);
+    e["ssim_mean"] = BandMetrics::mean(b.ssim);
+    e["ssim_std"] = BandMetrics::stddev(b.ssim);
+    e["images"] = b.psnr.size();
+    j[b.band] = e;
+  }
+  j["All"] = {{"psnr_mean", all_bands_mean(metrics, true)}, {"ssim_mean", all_bands_mean(metrics, false)}};
+  j["lpips"] = "not computed: LPIPS needs pretrained network weights, which cannot be obtained offline";
+  return j;
+}
+
+inline nlohmann::json times_json(const StageTimes& t) {
+  return {{"load", t.load}, {"project", t.project}, {"bin", t.bin}, {"blend", t.blend}, {"loss", t.loss},
+          {"backward", t.backward}, {"adam", t.adam}, {"densify", t.densify}, {"eval", t.eval}, {"total", t.total()}};
+}
+
+inline nlohmann::json plan_json(const TrainPlan& p) {
+  const DensifyConfig& d = p.densify;
+  return {{"strategy", p.name},
+          {"kind", to_string(p.kind)},
+          {"schedule_scale", p.scale.factor},
+          {"stage_steps", p.stage_steps},
+          {"spectral_start", p.spectral_start},
+          {"spectral_geometry_start", p.spectral_geometry_start},
+          {"sig", p.sig},
+          {"schedule",
+           {{"total_steps", p.schedule.total_steps}, {"sh_degree_every", p.schedule.sh_degree_every},
+            {"warmup_steps", p.schedule.warmup_steps}, {"resolution_every", p.schedule.resolution_every},
+            {"num_downscales", p.schedule.num_downscales}}},
+          {"densify",
+           {{"grow_grad2d", d.grow_grad2d}, {"absgrad", d.absgrad}, {"per_band", d.per_band},
+            {"grow_scale3d", d.grow_scale3d}, {"grow_scale2d", d.grow_scale2d}, {"prune_opacity", d.prune_opacity},
+            {"prune_scale3d", d.prune_scale3d}, {"prune_scale2d", d.prune_scale2d}, {"reset_opacity", d.reset_opacity},
+            {"refine_start", d.refine_start}, {"refine_stop", d.refine_stop}, {"refine_every", d.refine_every},
+            {"reset_every", d.reset_every}, {"screen_stop", d.screen_stop}, {"pause_begin", d.pause_begin},
+            {"pause_end", d.pause_end}}}};
+}
+
+inline nlohmann::json result_json(const RunResult& r) {
+  nlohmann::json j;
+  j["strategy"] = r.strategy;
+  j["plan"] = plan_json(r.plan);
+  j["metrics"] = metrics_json(r.metrics);
+  j["gaussians"] = r.gaussians;
+  nlohmann::json models = nlohmann::json::object();
+  for (const auto& [k, v] : r.models) models[k] = v.string();
+  j["models"] = models;
+  j["times"] = times_json(r.times);
+  j["seconds"] = r.seconds;
+  j["steps"] = r.steps;
+  j["interrupted"] = r.interrupted;
+  return j;
+}
+
+/// "| All | RGB | G | R | RE | NIR |" rows of PSNR and SSIM for the bands present.
+inline std::string metrics_markdown(const std::vector<BandMetrics>& metrics, const std::string& label = "") {
+  auto find = [&](const std::string& id) -> const BandMetrics* {
+    for (const auto& b : metrics) if (b.band == id) return &b;
+    return nullptr;
+  };
+  std::string head = "| " + (label.empty() ? std::string("metric") : std::string("run")) + " | All";
+  std::string sep = "|---|---";
+  for (const auto& id : report_bands()) if (find(id)) { head += " | " + band_label(id); sep += "|---"; }
+  head += " |\n";
+  sep += "|\n";
+  std::string out = head + sep;
+  char buf[64];
+  for (int m = 0; m < 2; ++m) {
+    const bool p = m == 0;
+    out += "| " + (label.empty() ? std::string(p ? "PSNR" : "SSIM") : label + (p ? " PSNR" : " SSIM"));
+    std::snprintf(buf, sizeof buf, p ? " | %.2f" : " | %.3f", all_bands_mean(metrics, p));
+    out += buf;
+    for (const auto& id : report_bands()) {
+      const BandMetrics* b = find(id);
+      if (!b) continue;
+      const auto& v = p ? b->psnr : b->ssim;
+      std::snprintf(buf, sizeof buf, p ? " | %.2f ± %.2f" : " | %.3f ± %.3f", BandMetrics::mean(v), BandMetrics::stddev(v));
+      out += buf;
+    }
+    out += " |\n";
+  }
+  return out;
+}
+
+/// One-line progress bar on stderr: step, ETA, loss, per-band training PSNR, Gaussians.
+inline void print_progress(const TrainProgress& p, const std::vector<std::string>& band_ids, const std::string& model) {
+  const double frac = double(p.step - p.begin) / double(std::max<long long>(1, p.end - p.begin));
+  const double eta = frac > 0 ? p.seconds * (1 - frac) / frac : 0;
+  const int width = 24, filled = int(frac * width);
+  std::string bar(std::size_t(filled), '#');
+  bar += std::string(std::size_t(width - filled), '.');
+  std::string psnrs;
+  char buf[64];
+  for (std::size_t i = 0; i < p.band_psnr.size() && i < band_ids.size(); ++i) {
+    if (std::isnan(p.band_psnr[i])) continue;
+    std::snprintf(buf, sizeof buf, " %s %.1f", band_label(band_ids[i]).c_str(), p.band_psnr[i]);
+    psnrs += buf;
+  }
+  std::fprintf(stderr, "\r[%s] %-6s %s step %lld/%lld  ETA %4.0fs  loss %.4f  PSNR%s  N %zu   ", bar.c_str(),
+               model.c_str(), "", p.step, p.end, eta, p.loss, psnrs.c_str(), p.gaussians);
+  if (p.step == p.end) std::fprintf(stderr, "\n");
+  std::fflush(stderr);
+}
+
+}  // namespace msgs::cli

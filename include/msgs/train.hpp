@@ -1,0 +1,332 @@
+// include/msgs/train.hpp
+// The training loop of one model: sample a band and image, render that band's channels, loss,
+// backward, Adam with the strategy's masks, densification; plus per-band evaluation. Strategies
+// (strategy.hpp) decide the plan and the hooks; run.hpp wires Separate / Split / Joint from it.
+#pragma once
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <span>
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "adam.hpp"
+#include "densify.hpp"
+#include "gaussian.hpp"
+#include "io/dataset.hpp"
+#include "loss.hpp"
+#include "rasterize.hpp"
+#include "schedule.hpp"
+#include "strategy.hpp"
+
+namespace msgs {
+
+/// A band as one trainer sees it: which model channels render it and which frames show it.
+struct TrainBand {
+  std::string id;                         ///< "D", "MS_G", "MS_R", "MS_RE", "MS_NIR"
+  int first_channel = 0;                  ///< first model channel of the band
+  int channels = 1;                       ///< 3 for RGB, 1 for a narrow band
+  bool spectral = false;                  ///< narrow band (SpecDelay / SIG treat these differently)
+  std::vector<std::size_t> train_frames;  ///< indices into Dataset::frames
+  std::vector<std::size_t> eval_frames;   ///< indices into Dataset::frames
+};
+
+/// Wall-clock seconds per stage of training, summed over steps.
+struct StageTimes {
+  double load = 0, project = 0, bin = 0, blend = 0, loss = 0, backward = 0, adam = 0, densify = 0, eval = 0;
+  double total() const { return load + project + bin + blend + loss + backward + adam + densify + eval; }
+  StageTimes& operator+=(const StageTimes& o) {
+    load += o.load; project += o.project; bin += o.bin; blend += o.blend; loss += o.loss;
+    backward += o.backward; adam += o.adam; densify += o.densify; eval += o.eval;
+    return *this;
+  }
+};
+
+/// What the progress callback receives.
+struct TrainProgress {
+  long long step = 0, begin = 0, end = 0;
+  double loss = 0;                   ///< running mean of the loss
+  std::vector<double> band_psnr;     ///< running mean of the training PSNR per band (NaN until seen)
+  std::size_t gaussians = 0;
+  double seconds = 0;                ///< since train() started
+  DensifyReport last_refine;         ///< most recent refinement
+};
+
+/// Options of a training run that are not part of the strategy's plan.
+struct TrainOptions {
+  std::uint64_t seed = 0;            ///< band sampling, backgrounds, split samples
+  AdamConfig adam{};                 ///< learning rates (lr_means_steps is set from the plan)
+  PhotometricLossConfig loss{};
+  ScaleRegConfig scale_reg{};
+  int scale_reg_every = 10;          ///< the regulariser is added every this many steps (0 = never)
+  bool random_background = true;     ///< random background per step (else black)
+  double scene_scale = 1.0;
+  int progress_every = 25;           ///< steps between progress callbacks
+  std::function<void(const TrainProgress&)> on_progress;
+  const std::atomic<bool>* stop = nullptr;  ///< set by a signal handler: stop after the current step
+  bool check_finite = false;         ///< verify every parameter is finite after each step (soak runs)
+};
+
+/// Per-band evaluation: one PSNR and SSIM per eval image.
+struct BandMetrics {
+  std::string band;
+  std::vector<double> psnr, ssim;
+  static double mean(const std::vector<double>& v) {
+    if (v.empty()) return std::nan("");
+    double s = 0; for (double x : v) s += x; return s / double(v.size());
+  }
+  static double stddev(const std::vector<double>& v) {
+    if (v.size() < 2) return 0.0;
+    const double m = mean(v);
+    double s = 0; for (double x : v) s += (x - m) * (x - m);
+    return std::sqrt(s / double(v.size() - 1));
+  }
+};
+
+/// Caches a dataset's images at the current training resolution (one resolution at a time).
+class ImageCache {
+ public:
+  explicit ImageCache(const io::Dataset& ds) : ds_(&ds) {}
+  const Image<float>& get(std::size_t frame, int factor) {
+    if (factor != factor_) { cache_.clear(); factor_ = factor; }
+    auto it = cache_.find(frame);
+    if (it != cache_.end()) return it->second;
+    return cache_.emplace(frame, io::load_frame_image(*ds_, ds_->frames[frame], factor)).first->second;
+  }
+  Camera<float> camera(std::size_t frame, int factor) const { return io::frame_camera(*ds_, ds_->frames[frame], factor); }
+
+ private:
+  const io::Dataset* ds_;
+  int factor_ = -1;
+  std::map<std::size_t, Image<float>> cache_;
+};
+
+/// Clamp an image to [0, 1] in place (evaluation renders).
+inline void clamp01(Image<float>& img) {
+  for (float& v : img.data) v = std::clamp(v, 0.0f, 1.0f);
+}
+
+/// Trains one model of Gaussian type G on a set of bands.
+template <class G>
+class Trainer {
+ public:
+  using Model = GaussianModel<G, float>;
+
+  Trainer(const io::Dataset& ds, std::vector<TrainBand> bands, Model model, TrainPlan plan, StrategyHooks hooks,
+          TrainOptions opt)
+      : ds_(&ds), bands_(std::move(bands)), model_(std::move(model)), plan_(std::move(plan)), hooks_(hooks),
+        opt_(std::move(opt)), images_(ds),
+        density_(plan_.densify, int(bands_.size()), count_train_images(), opt_.scene_scale) {
+    if (bands_.empty()) throw std::invalid_argument("Trainer: no bands to train");
+    for (const auto& b : bands_) {
+      if (b.first_channel < 0 || b.channels < 1 || b.first_channel + b.channels > G::bands)
+        throw std::invalid_argument("Trainer: band " + b.id + " does not fit the model's " + std::to_string(G::bands) +
+                                    " channels");
+      if (b.train_frames.empty()) throw std::invalid_argument("Trainer: band " + b.id + " has no training images");
+    }
+    AdamConfig ac = opt_.adam;
+    ac.lr_means_steps = plan_.schedule.total_steps;
+    ac.scene_scale = opt_.scene_scale;
+    adam_ = Adam<G, float>(ac, model_.size());
+    band_psnr_.assign(bands_.size(), std::nan(""));
+  }
+
+  Model& model() { return model_; }
+  const Model& model() const { return model_; }
+  Adam<G, float>& adam() { return adam_; }
+  DensityControl& density() { return density_; }
+  const StageTimes& times() const { return times_; }
+  const std::vector<TrainBand>& bands() const { return bands_; }
+  const TrainPlan& plan() const { return plan_; }
+
+  /// Train steps [begin, end). Returns the first step not taken (end, or earlier when stopped).
+  long long train(long long begin, long long end) {
+    using clock = std::chrono::steady_clock;
+    const auto t_start = clock::now();
+    Rasterizer<G, float> raster;
+    Gradients<G, float> grads;
+    Image<float> d_image;
+    SsimWorkspace<float> ws;
+    double loss_sum = 0;
+    long long loss_n = 0;
+    DensifyReport last_rep;
+    long long step = begin;
+    for (; step < end; ++step) {
+      if (opt_.stop && opt_.stop->load()) break;
+      auto t0 = clock::now();
+      // 1. Which band and image.
+      const auto [bi, frame] = sample(step);
+      const TrainBand& band = bands_[std::size_t(bi)];
+      const int factor = plan_.schedule.downscale(step);
+      const Image<float>& gt = images_.get(frame, factor);
+      const Camera<float> cam = images_.camera(frame, factor);
+      auto t1 = clock::now();
+      times_.load += seconds(t0, t1);
+
+      // 2. Render only this band's channels.
+      RenderSettings<float> rs;
+      rs.band_first = band.first_channel;
+      rs.band_count = band.channels;
+      rs.sh_degree = plan_.schedule.sh_degree(step, G::sh_degree);
+      rs.background = opt_.random_background ? random_background<float>(step, band.channels, opt_.seed)
+                                             : std::vector<float>(std::size_t(band.channels), 0.0f);
+      raster.timings().reset();
+      const Image<float>& render = raster.forward(model_, cam, rs);
+      auto t2 = clock::now();
+
+      // 3. Loss and its gradient.
+      const double loss = photometric_loss(render, gt, &d_image, ws, opt_.loss);
+      loss_sum += loss;
+      ++loss_n;
+      const double p = psnr(render, gt);
+      double& bp = band_psnr_[std::size_t(bi)];
+      bp = std::isnan(bp) ? p : 0.9 * bp + 0.1 * p;
+      auto t3 = clock::now();
+
+      // 4. Backward.
+      raster.backward(d_image, nullptr, nullptr, grads);
+      if (opt_.scale_reg_every > 0 && step % opt_.scale_reg_every == 0)
+        scale_reg<float>(std::span<const float>(model_.log_scales), std::span<float>(grads.model.log_scales),
+                         opt_.scale_reg);
+      auto t4 = clock::now();
+      times_.project += raster.timings().project;
+      times_.bin += raster.timings().bin;
+      times_.blend += raster.timings().blend;
+      times_.loss += seconds(t2, t3);
+      times_.backward += seconds(t3, t4);
+
+      // 5. The strategy's masks, then Adam.
+      StepContext ctx;
+      ctx.step = step;
+      ctx.band = bi;
+      ctx.spectral = band.spectral;
+      ctx.mask = AdamMask::band(band.first_channel, band.channels);
+      hooks_.pre_backward(plan_, ctx);
+      adam_.step(model_, grads.model, ctx.mask);
+      auto t5 = clock::now();
+      times_.adam += seconds(t4, t5);
+
+      // 6. Adaptive density control.
+      if (ctx.observe_density && density_.accumulates_at(step))
+        density_.observe_gradients(step, bi, grads, raster.radii(), cam.width, cam.height);
+      const DensifyReport rep = density_.step_post_backward(step, model_, adam_.exp_avg, adam_.exp_avg_sq);
+      if (rep.refined || rep.opacity_reset) last_rep = rep;
+      auto t6 = clock::now();
+      times_.densify += seconds(t5, t6);
+
+      if (opt_.check_finite) check_finite(step);
+      if (opt_.on_progress && ((step + 1 - begin) % std::max(1, opt_.progress_every) == 0 || step + 1 == end)) {
+        TrainProgress pr;
+        pr.step = step + 1; pr.begin = begin; pr.end = end;
+        pr.loss = loss_sum / double(std::max<long long>(loss_n, 1));
+        loss_sum = 0; loss_n = 0;
+        pr.band_psnr = band_psnr_;
+        pr.gaussians = model_.size();
+        pr.seconds = seconds(t_start, clock::now());
+        pr.last_refine = last_rep;
+        opt_.on_progress(pr);
+      }
+    }
+    return step;
+  }
+
+  /// PSNR and SSIM of every eval image of every band at full resolution, with the evaluation
+  /// background (REFERENCE §3) and renders clamped to [0, 1].
+  std::vector<BandMetrics> evaluate(bool eval_split = true) {
+    const auto t0 = std::chrono::steady_clock::now();
+    std::vector<BandMetrics> out;
+    Rasterizer<G, float> raster;
+    ImageCache full(*ds_);
+    for (const auto& band : bands_) {
+      BandMetrics m;
+      m.band = band.id;
+      const auto& frames = eval_split ? band.eval_frames : band.train_frames;
+      for (std::size_t f : frames) {
+        RenderSettings<float> rs;
+        rs.band_first = band.first_channel;
+        rs.band_count = band.channels;
+        rs.background = eval_background<float>(band.channels);
+        Image<float> render = raster.forward(model_, full.camera(f, 1), rs);
+        clamp01(render);
+        const Image<float>& gt = full.get(f, 1);
+        m.psnr.push_back(psnr(render, gt));
+        m.ssim.push_back(ssim(render, gt));
+      }
+      out.push_back(std::move(m));
+    }
+    times_.eval += seconds(t0, std::chrono::steady_clock::now());
+    return out;
+  }
+
+ private:
+  static double seconds(std::chrono::steady_clock::time_point a, std::chrono::steady_clock::time_point b) {
+    return std::chrono::duration<double>(b - a).count();
+  }
+
+  int count_train_images() const {
+    std::size_t n = 0;
+    for (const auto& b : bands_) n += b.train_frames.size();
+    return int(n);
+  }
+
+  /// Round-robin over the bands the strategy enables at `step` (REFERENCE §3): each enabled set
+  /// has its own sampler, a pure function of the step, so runs resume exactly.
+  std::pair<int, std::size_t> sample(long long step) {
+    std::uint32_t mask = 0;
+    for (std::size_t b = 0; b < bands_.size(); ++b)
+      if (hooks_.band_enabled(plan_, step, bands_[b].spectral)) mask |= 1u << b;
+    if (mask == 0) throw std::logic_error("Trainer: the strategy enables no band at step " + std::to_string(step));
+    auto it = samplers_.find(mask);
+    if (it == samplers_.end()) {
+      std::vector<std::vector<int>> lists;
+      std::vector<int> ids;
+      for (std::size_t b = 0; b < bands_.size(); ++b)
+        if (mask & (1u << b)) {
+          std::vector<int> l(bands_[b].train_frames.size());
+          for (std::size_t i = 0; i < l.size(); ++i) l[i] = int(i);
+          lists.push_back(std::move(l));
+          ids.push_back(int(b));
+        }
+      it = samplers_.emplace(mask, std::make_pair(BandSampler(std::move(lists), opt_.seed ^ 0x5eedULL), ids)).first;
+    }
+    const BandSampler::Draw d = it->second.first.at(step);
+    const int b = it->second.second[std::size_t(d.band)];
+    return {b, bands_[std::size_t(b)].train_frames[std::size_t(d.image)]};
+  }
+
+  void check_finite(long long step) const {
+    auto check = [&](const std::vector<float>& v, const char* name) {
+      for (float x : v)
+        if (!std::isfinite(x))
+          throw std::runtime_error("training produced a non-finite " + std::string(name) + " at step " +
+                                   std::to_string(step));
+    };
+    check(model_.means, "mean");
+    check(model_.log_scales, "log-scale");
+    check(model_.quats, "quaternion");
+    check(model_.opacity_logits, "opacity logit");
+    check(model_.sh, "SH coefficient");
+  }
+
+  const io::Dataset* ds_;
+  std::vector<TrainBand> bands_;
+  Model model_;
+  TrainPlan plan_;
+  StrategyHooks hooks_;
+  TrainOptions opt_;
+  ImageCache images_;
+  Adam<G, float> adam_;
+  DensityControl density_;
+  StageTimes times_;
+  std::vector<double> band_psnr_;
+  std::map<std::uint32_t, std::pair<BandSampler, std::vector<int>>> samplers_;
+};
+
+}  // namespace msgs
