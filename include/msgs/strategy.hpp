@@ -253,6 +253,8 @@ inline std::string canonical_strategy_name(std::string_view name) {
   std::string lower(name);
   for (char& c : lower) c = char(std::tolower(static_cast<unsigned char>(c)));
   if (lower == "joint-optimized" || lower == "joint_optimized" || lower == "jointoptimized") return "joint+specdelay+msad";
+  // getline drops an empty last field, so "joint+" would read as "joint": keep it invalid.
+  if (!lower.empty() && lower.back() == '+') return lower;
   std::vector<std::string> parts;
   std::stringstream ss(lower);
   for (std::string part; std::getline(ss, part, '+');) parts.push_back(part);
