@@ -1,0 +1,7 @@
+// examples/cmd_render_c3.cpp
+// Rasterizers for 3-channel models (SH degree 0..3), used by `msgs render` and `msgs eval`.
+#include "render_dispatch.hpp"
+
+namespace msgs::cli {
+ChannelRenderer make_renderer_c3(std::shared_ptr<const LoadedModel> m) { return make_channel_renderer<3>(std::move(m)); }
+}  // namespace msgs::cli
