@@ -184,6 +184,22 @@ inline int find_property(const PlyElement& e, std::string_view name) {
   return -1;
 }
 
+/// Bytes from the current position of `in` to its end (the stream is left where it was);
+/// SIZE_MAX when the stream cannot tell (then no size check is possible).
+inline std::size_t remaining_bytes(std::istream& in) {
+  const std::streampos here = in.tellg();
+  if (here < 0) return SIZE_MAX;
+  in.seekg(0, std::ios::end);
+  const std::streampos last = in.tellg();
+  in.seekg(here);
+  if (last < here || !in) {
+    in.clear();
+    in.seekg(here);
+    return SIZE_MAX;
+  }
+  return static_cast<std::size_t>(last - here);
+}
+
 /// Stream over the data section. Reads the "vertex" element into [N, names.size()] floats
 /// (the properties named, in that order), skips the other elements, and refuses truncated
 /// files, trailing data, list properties in the vertex element and non-finite values.
@@ -203,6 +219,25 @@ inline std::vector<float> read_vertex_columns(std::istream& in, const PlyHeader&
   }
   for (const auto& prop : vert->props)
     if (prop.is_list) fail(p, prop.name, "list properties are not supported in the vertex element");
+
+  // The counts come from the header: check them against the bytes actually present before
+  // allocating, so a tiny file claiming 1e12 vertices fails at once instead of asking for terabytes.
+  const std::size_t avail = remaining_bytes(in);
+  // An ASCII file may lack the newline after its last entry.
+  const std::size_t budget = avail == SIZE_MAX ? avail : avail + (h.format == PlyFormat::ascii ? 1 : 0);
+  std::size_t need = 0;
+  for (const auto& e : h.elements) {
+    // The fewest bytes one entry can take: binary, its fixed-size values (and list counts);
+    // ASCII, one character and a newline (finer errors, such as a missing value, come below).
+    std::size_t min_row = h.format == PlyFormat::ascii ? 2 : 0;
+    if (h.format != PlyFormat::ascii)
+      for (const auto& pr : e.props) min_row += ply_type_size(pr.is_list ? pr.count_type : pr.type);
+    if (min_row == 0 || e.count == 0) continue;
+    if (e.count > (budget - need) / min_row)
+      fail(p, cat("truncated: element '", e.name, "' declares ", e.count, " entries, data ends in entry ",
+                  (budget - need) / min_row, " (", avail, " bytes of data)"));
+    need += e.count * min_row;
+  }
 
   const std::size_t ncol = names.size();
   std::vector<float> out(vert->count * ncol);
@@ -239,7 +274,9 @@ inline std::vector<float> read_vertex_columns(std::istream& in, const PlyHeader&
           const auto& pr = e.props[prop];
           if (pr.is_list) {
             const double n = next_value(pr.name);
-            if (!(n >= 0) || n != std::floor(n)) fail(p, pr.name, "bad list length");
+            // Each value needs a character of the line, which also keeps the cast below in range.
+            if (!(n >= 0) || n != std::floor(n) || n > double(end - s))
+              fail(p, pr.name, cat("bad list length in ", e.name, " ", row));
             for (std::size_t i = 0; i < static_cast<std::size_t>(n); ++i) (void)next_value(pr.name);
           } else {
             const double v = next_value(pr.name);
@@ -293,7 +330,9 @@ inline std::vector<float> read_vertex_columns(std::istream& in, const PlyHeader&
             fail(p, cat("truncated: element '", e.name, "' declares ", e.count, " entries, data ends in entry ", row));
           if (!pr.is_list) continue;
           const double n = ply_decode(b, pr.count_type, swap);
-          if (!(n >= 0)) fail(p, pr.name, "negative list length");
+          // A float count type can hold NaN, fractions or 1e300: refuse them before the cast.
+          if (!(n >= 0) || n != std::floor(n) || n >= double(avail))
+            fail(p, pr.name, cat("bad list length in ", e.name, " ", row));
           in.ignore(static_cast<std::streamsize>(static_cast<std::size_t>(n) * ply_type_size(pr.type)));
           if (!in) fail(p, cat("truncated: element '", e.name, "' entry ", row));
         }
