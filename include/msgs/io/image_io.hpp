@@ -47,6 +47,21 @@ inline void check_writable_image(const std::filesystem::path& p, const Image<flo
     fail(p, "image buffer size does not match width x height x channels");
 }
 
+/// Refuse a header that claims far more pixel data than the file could hold, before anything is
+/// allocated: `raw_bytes` (what the decoder would produce) may exceed the file size by at most
+/// `max_ratio` (the codec's best compression), plus 16 MiB so that small flat images always pass.
+/// Without this a 60-byte file claiming 1e6 x 1e6 pixels asks for terabytes. Doubles: no overflow.
+inline void check_plausible_size(const std::filesystem::path& p, const char* format, std::uint64_t width,
+                                 std::uint64_t height, int channels, double raw_bytes, std::size_t file_size,
+                                 double max_ratio) {
+  if (width < 1 || height < 1) fail(p, cat(format, " has an empty image"));
+  if (width > 2147483647u || height > 2147483647u)
+    fail(p, cat(format, " claims ", width, "x", height, " pixels (more than 2^31 - 1 in one dimension)"));
+  if (raw_bytes > max_ratio * double(file_size) + 16.0 * 1024 * 1024)
+    fail(p, cat(format, " header claims ", width, "x", height, "x", channels, " samples but the file has only ",
+                file_size, " bytes (corrupt header?)"));
+}
+
 // ---- libpng plumbing. libpng reports errors by longjmp; the functions that call setjmp keep no
 // non-trivial locals alive across it (C++ forbids skipping their destructors), so every buffer
 // lives in the caller.
@@ -92,6 +107,16 @@ inline bool png_decode(const unsigned char* data, std::size_t size, std::vector<
   }
   png_set_read_fn(png, &mem, png_read_mem);
   png_read_info(png, info);
+  // Deflate expands at most 1032:1; each stored row has a filter byte. Checked here, before the
+  // buffers are sized, since libpng's own limit (1e6 x 1e6 pixels) allows terabytes.
+  if (double(png_get_image_height(png, info)) * (double(png_get_rowbytes(png, info)) + 2.0) >
+      1032.0 * double(size) + 16.0 * 1024 * 1024) {
+    std::snprintf(err.msg, sizeof err.msg, "header claims %lux%lu pixels but the file has only %zu bytes",
+                  static_cast<unsigned long>(png_get_image_width(png, info)),
+                  static_cast<unsigned long>(png_get_image_height(png, info)), size);
+    png_destroy_read_struct(&png, &info, nullptr);
+    return false;
+  }
   const int color_type = png_get_color_type(png, info);
   const int bit_depth = png_get_bit_depth(png, info);
   if (color_type == PNG_COLOR_TYPE_PALETTE) png_set_palette_to_rgb(png);
@@ -232,7 +257,7 @@ class TiffFile {
   TIFF* tif_ = nullptr;
 };
 
-inline Image<float> read_tiff(const std::filesystem::path& p) {
+inline Image<float> read_tiff(const std::filesystem::path& p, std::size_t file_size) {
   TiffFile tf(p, "r");
   TIFF* tif = tf.get();
   if (!tif) fail(p, cat("cannot open TIFF: ", tf.error()));
@@ -253,6 +278,9 @@ inline Image<float> read_tiff(const std::filesystem::path& p) {
   if (spp < 1 || spp > 4) fail(p, cat("unsupported TIFF samples per pixel ", std::to_string(spp), " (need 1 to 4)"));
   if (photo == PHOTOMETRIC_PALETTE) fail(p, "palette TIFF images are not supported");
   if (w == 0 || h == 0) fail(p, "TIFF has an empty image");
+  // LZW, Deflate, ZSTD or LZMA strips may compress well, but not beyond ~4096:1.
+  check_plausible_size(p, "TIFF", w, h, spp, double(w) * double(h) * double(spp) * double(bits / 8), file_size,
+                       4096.0);
   if (TIFFIsTiled(tif) && planar != PLANARCONFIG_CONTIG) fail(p, "tiled TIFF with separate planes is not supported");
 
   Image<float> img(static_cast<int>(w), static_cast<int>(h), spp);
@@ -324,6 +352,11 @@ inline Image<float> read_stb(const std::filesystem::path& p, const std::vector<u
   const bool is_jpeg = bytes.size() >= 3 && bytes[0] == 0xFF && bytes[1] == 0xD8 && bytes[2] == 0xFF;
   if (is_jpeg && !jpeg_looks_complete(bytes)) fail(p, "JPEG is truncated (no end-of-image marker)");
   int w = 0, h = 0, n = 0;
+  // stb pads truncated BMP/TGA data instead of failing, so bound the claimed size first (JPEG,
+  // RLE and LZW formats compress well below 1024:1 for real images).
+  if (stbi_info_from_memory(bytes.data(), static_cast<int>(bytes.size()), &w, &h, &n))
+    check_plausible_size(p, "image", std::uint64_t(std::max(w, 0)), std::uint64_t(std::max(h, 0)), n,
+                         double(w) * double(h) * double(n), bytes.size(), 1024.0);
   unsigned char* px = stbi_load_from_memory(bytes.data(), static_cast<int>(bytes.size()), &w, &h, &n, 0);
   if (!px) {
     const char* why = stbi_failure_reason();
@@ -349,7 +382,7 @@ inline Image<float> read_image(const std::filesystem::path& p) {
   if (std::memcmp(bytes.data(), png_sig, 8) == 0) return detail::read_png(p, bytes);
   const bool tiff = (bytes[0] == 'I' && bytes[1] == 'I' && (bytes[2] == 42 || bytes[2] == 43) && bytes[3] == 0) ||
                     (bytes[0] == 'M' && bytes[1] == 'M' && bytes[2] == 0 && (bytes[3] == 42 || bytes[3] == 43));
-  if (tiff) return detail::read_tiff(p);
+  if (tiff) return detail::read_tiff(p, bytes.size());
   return detail::read_stb(p, bytes);
 }
 
@@ -447,9 +480,12 @@ inline Image<float> read_npy(const std::filesystem::path& p) {
   }
   if (dims.size() == 2) dims.push_back(1);
   if (dims.size() != 3 || dims[0] < 1 || dims[1] < 1 || dims[2] < 1) fail(p, "shape", "need (H, W, C) or (H, W)");
+  // Compare with the data present before allocating (doubles: a shape like (1e18, 1e18) must not wrap).
+  const std::size_t data_bytes = b.size() - 10 - hlen;
+  if (double(dims[0]) * double(dims[1]) * double(dims[2]) * 4.0 != double(data_bytes) || dims[0] > INT32_MAX ||
+      dims[1] > INT32_MAX || dims[2] > INT32_MAX)
+    fail(p, cat("data size ", std::to_string(data_bytes), " bytes does not match the shape (truncated?)"));
   Image<float> img(static_cast<int>(dims[1]), static_cast<int>(dims[0]), static_cast<int>(dims[2]));
-  if (b.size() != 10 + hlen + img.size() * 4)
-    fail(p, cat("data size ", std::to_string(b.size() - 10 - hlen), " bytes does not match the shape (truncated?)"));
   const unsigned char* d = b.data() + 10 + hlen;
   for (std::size_t i = 0; i < img.size(); ++i) {
     const std::uint32_t u = std::uint32_t(d[4 * i]) | (std::uint32_t(d[4 * i + 1]) << 8) |
