@@ -17,7 +17,7 @@ namespace {
 
 constexpr const char* kUsage =
     "usage: msgs train --data DIR --out DIR [--strategy NAME] [--scale F] [--sh-degree D]\n"
-    "                  [--bands D,MS_G,...] [--seed S] [--no-orient]\n"
+    "                  [--bands D,MS_G,...] [--seed S] [--no-orient] [--resume] [--checkpoint-every N]\n"
     "\n"
     "Train Gaussian splats on a multi-spectral dataset (nerfstudio-style layout) with one of the\n"
     "paper's strategies, evaluate every band on the eval split and write to DIR:\n"
@@ -33,7 +33,10 @@ constexpr const char* kUsage =
     "  --bands LIST      train only these bands (comma separated ids)\n"
     "  --seed S          seed of sampling, backgrounds and initial colours (default 0)\n"
     "  --no-orient       keep the dataset's coordinates (no re-orientation and centring)\n"
-    "Ctrl-C stops after the current step and still writes the models and metrics.\n";
+    "  --checkpoint-every N  also checkpoint every N steps (always at the end and on Ctrl-C)\n"
+    "  --resume          continue from DIR/checkpoints/*.ckpt; the result equals an uninterrupted run\n"
+    "Ctrl-C stops after the current step, writes a checkpoint, the models and the metrics;\n"
+    "run the same command with --resume to continue.\n";
 
 std::atomic<bool> g_stop{false};
 void on_sigint(int) { g_stop.store(true); }
@@ -50,8 +53,8 @@ std::vector<std::string> split_list(const std::string& s) {
 }
 
 int run_train(const std::vector<std::string>& argv) {
-  const msgs::cli::Args args(argv, {"data", "out", "strategy", "scale", "sh-degree", "bands", "seed"},
-                             {"help", "no-orient", "quiet"});
+  const msgs::cli::Args args(argv, {"data", "out", "strategy", "scale", "sh-degree", "bands", "seed", "checkpoint-every"},
+                             {"help", "no-orient", "quiet", "resume"});
   if (args.flag("help")) { std::fputs(kUsage, stdout); return 0; }
   if (!args.positional().empty()) throw msgs::cli::UsageError("unexpected argument '" + args.positional()[0] + "'");
   const std::filesystem::path data = args.require("data"), out = args.require("out");
@@ -64,6 +67,10 @@ int run_train(const std::vector<std::string>& argv) {
   cfg.bands = split_list(args.get("bands"));
   cfg.train.seed = std::uint64_t(args.integer("seed", 0));
   cfg.init.seed = std::uint32_t(cfg.train.seed);
+  cfg.resume = args.flag("resume");
+  const long every = args.integer("checkpoint-every", 0);
+  if (every < 0) throw msgs::cli::UsageError("--checkpoint-every must be >= 0");
+  cfg.train.checkpoint_every = int(every);
   try {
     (void)msgs::parse_strategy(cfg.strategy, msgs::ScheduleScale{cfg.scale});
   } catch (const std::invalid_argument& e) {
@@ -105,7 +112,8 @@ int run_train(const std::vector<std::string>& argv) {
   std::printf("\ntime (s): project %.1f  bin %.1f  blend %.1f  loss %.1f  backward %.1f  adam %.1f  densify %.1f  load %.1f  eval %.1f\n",
               t.project, t.bin, t.blend, t.loss, t.backward, t.adam, t.densify, t.load, t.eval);
   std::printf("LPIPS: not computed (needs pretrained network weights, unavailable offline)\n");
-  if (res.interrupted) std::printf("interrupted: models and metrics reflect the state at the stop\n");
+  if (res.interrupted)
+    std::printf("interrupted: models and metrics reflect the state at the stop; continue with --resume\n");
   std::printf("wrote %s\n", (out / "result.json").string().c_str());
   return res.interrupted ? 130 : 0;
 }

@@ -396,6 +396,23 @@ class DensityStats {
   /// [N] the same for all Gaussians.
   const std::vector<float>& max_radii() const { return radius_; }
 
+  /// Raw accumulators, for checkpoints: [N, B] gradient sums, [N, B] counts, [N] max radii.
+  const std::vector<float>& grad_sums() const { return grad_; }
+  const std::vector<std::uint32_t>& counts() const { return count_; }
+  /// Restore accumulators saved from grad_sums()/counts()/max_radii() of `n` Gaussians, `bands` bands.
+  void restore(std::size_t n, int bands, std::vector<float> grad, std::vector<std::uint32_t> count,
+               std::vector<float> radius) {
+    if (bands < 1 || grad.size() != n * std::size_t(bands) || count.size() != n * std::size_t(bands) ||
+        radius.size() != n)
+      throw std::invalid_argument("DensityStats::restore: arrays do not match " + std::to_string(n) + " Gaussians x " +
+                                  std::to_string(bands) + " bands");
+    n_ = n;
+    bands_ = bands;
+    grad_ = std::move(grad);
+    count_ = std::move(count);
+    radius_ = std::move(radius);
+  }
+
  private:
   std::size_t n_ = 0;
   int bands_ = 1;
@@ -458,6 +475,8 @@ class DensityControl {
 
   const DensifyConfig& config() const { return cfg_; }
   const DensityStats& stats() const { return stats_; }
+  /// Mutable statistics, for restoring a checkpoint.
+  DensityStats& stats() { return stats_; }
   double scene_scale() const { return scene_scale_; }
   int num_bands() const { return num_bands_; }
   /// Steps after each opacity reset without refinement (resolved from num_train_images).

@@ -31,6 +31,11 @@ struct RunConfig {
   TrainOptions train{};               ///< seed, learning rates, callbacks
   InitConfig init{};                  ///< initialisation from the sparse point cloud
   std::size_t random_init_points = 20000;  ///< used when the dataset has no point cloud
+  /// Keep checkpoints in <out_dir>/checkpoints/<model>.ckpt (every train.checkpoint_every steps,
+  /// at the end and when stopped) and, with `resume`, continue each model from its checkpoint:
+  /// the result is the same, bit for bit, as an uninterrupted run.
+  bool checkpoints = true;
+  bool resume = false;
 };
 
 /// Result of one experiment.
@@ -116,9 +121,17 @@ GaussianModel<G, float> train_model(const io::Dataset& ds, std::vector<TrainBand
                                     const StrategySpec& spec, const RunConfig& cfg, long long begin, long long end,
                                     const std::string& key, const std::filesystem::path& out_dir,
                                     const std::vector<std::string>& names, RunResult& res, std::int64_t adam_iteration) {
-  Trainer<G> tr(ds, std::move(bands), std::move(model), spec.plan, spec.hooks, cfg.train);
+  TrainOptions topt = cfg.train;
+  std::filesystem::path ckpt;
+  if (cfg.checkpoints && !out_dir.empty()) {
+    std::filesystem::create_directories(out_dir / "checkpoints");
+    ckpt = out_dir / "checkpoints" / (key + ".ckpt");
+  }
+  topt.checkpoint_path = ckpt;
+  Trainer<G> tr(ds, std::move(bands), std::move(model), spec.plan, spec.hooks, topt);
   tr.adam().iteration = adam_iteration;
-  const long long reached = tr.train(begin, end);
+  if (cfg.resume && !ckpt.empty() && std::filesystem::exists(ckpt)) begin = tr.restore(load_checkpoint<G>(ckpt));
+  const long long reached = begin >= end ? end : tr.train(begin, end);
   res.steps += reached - begin;
   if (reached < end) res.interrupted = true;
   for (auto& m : tr.evaluate()) res.metrics.push_back(std::move(m));

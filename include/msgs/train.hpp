@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "adam.hpp"
+#include "checkpoint.hpp"
 #include "densify.hpp"
 #include "gaussian.hpp"
 #include "io/dataset.hpp"
@@ -72,6 +73,10 @@ struct TrainOptions {
   std::function<void(const TrainProgress&)> on_progress;
   const std::atomic<bool>* stop = nullptr;  ///< set by a signal handler: stop after the current step
   bool check_finite = false;         ///< verify every parameter is finite after each step (soak runs)
+  /// Where train() writes checkpoints (empty: none): every `checkpoint_every` steps, at the end,
+  /// and when stopped early, so an interrupted run always leaves a usable checkpoint.
+  std::filesystem::path checkpoint_path;
+  int checkpoint_every = 0;          ///< 0: only at the end and when stopped
 };
 
 /// Per-band evaluation: one PSNR and SSIM per eval image.
@@ -138,6 +143,35 @@ class Trainer {
     band_psnr_.assign(bands_.size(), std::nan(""));
   }
 
+  /// Everything needed to continue at `next_step` bit for bit.
+  TrainState<G> state(long long next_step) const {
+    TrainState<G> st;
+    st.step = next_step;
+    st.model = model_;
+    st.exp_avg = adam_.exp_avg;
+    st.exp_avg_sq = adam_.exp_avg_sq;
+    st.adam_steps = adam_.steps;
+    st.adam_iteration = adam_.iteration;
+    const DensityStats& ds = density_.stats();
+    st.stats_bands = ds.bands();
+    st.stats_grad = ds.grad_sums();
+    st.stats_count = ds.counts();
+    st.stats_radius = ds.max_radii();
+    return st;
+  }
+
+  /// Continue from a saved state; returns the step to resume at.
+  long long restore(TrainState<G> st) {
+    model_ = std::move(st.model);
+    adam_.exp_avg = std::move(st.exp_avg);
+    adam_.exp_avg_sq = std::move(st.exp_avg_sq);
+    adam_.steps = st.adam_steps;
+    adam_.iteration = st.adam_iteration;
+    density_.stats().restore(model_.size(), st.stats_bands, std::move(st.stats_grad), std::move(st.stats_count),
+                             std::move(st.stats_radius));
+    return st.step;
+  }
+
   Model& model() { return model_; }
   const Model& model() const { return model_; }
   Adam<G, float>& adam() { return adam_; }
@@ -160,6 +194,8 @@ class Trainer {
     long long step = begin;
     for (; step < end; ++step) {
       if (opt_.stop && opt_.stop->load()) break;
+      if (!opt_.checkpoint_path.empty() && opt_.checkpoint_every > 0 && step > begin && step % opt_.checkpoint_every == 0)
+        save_checkpoint(opt_.checkpoint_path, state(step));
       auto t0 = clock::now();
       // 1. Which band and image.
       const auto [bi, frame] = sample(step);
@@ -234,6 +270,7 @@ class Trainer {
         opt_.on_progress(pr);
       }
     }
+    if (!opt_.checkpoint_path.empty()) save_checkpoint(opt_.checkpoint_path, state(step));
     return step;
   }
 

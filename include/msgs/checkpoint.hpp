@@ -1,0 +1,168 @@
+// include/msgs/checkpoint.hpp
+// Training checkpoints: everything a run needs to continue bit for bit (model, Adam moments and
+// counters, densification statistics, the next step) in one little-endian binary file, written
+// atomically so an interrupted write never replaces a good checkpoint.
+#pragma once
+
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "adam.hpp"
+#include "densify.hpp"
+#include "gaussian.hpp"
+#include "io/file.hpp"
+
+namespace msgs {
+
+/// The state of one model's training at a step boundary.
+template <class G>
+struct TrainState {
+  long long step = 0;                 ///< the next step to run
+  GaussianModel<G, float> model;
+  GaussianModel<G, float> exp_avg, exp_avg_sq;
+  typename Adam<G, float>::Steps adam_steps{};
+  std::int64_t adam_iteration = 0;
+  int stats_bands = 1;
+  std::vector<float> stats_grad;          // [N, B]
+  std::vector<std::uint32_t> stats_count; // [N, B]
+  std::vector<float> stats_radius;        // [N]
+};
+
+namespace detail {
+
+inline constexpr char kCheckpointMagic[8] = {'M', 'S', 'G', 'S', 'C', 'K', 'P', '1'};
+
+class CkptWriter {
+ public:
+  template <class T>
+  void pod(const T& v) { buf_.append(reinterpret_cast<const char*>(&v), sizeof(T)); }
+  template <class T>
+  void vec(const std::vector<T>& v) {
+    pod(std::uint64_t(v.size()));
+    if (!v.empty()) buf_.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T));
+  }
+  const std::string& bytes() const { return buf_; }
+
+ private:
+  std::string buf_;
+};
+
+class CkptReader {
+ public:
+  CkptReader(std::vector<unsigned char> bytes, std::filesystem::path path) : b_(std::move(bytes)), path_(std::move(path)) {}
+  template <class T>
+  T pod(const char* field) {
+    need(sizeof(T), field);
+    T v;
+    std::memcpy(&v, b_.data() + pos_, sizeof(T));
+    pos_ += sizeof(T);
+    return v;
+  }
+  template <class T>
+  std::vector<T> vec(const char* field, std::uint64_t expected) {
+    const auto n = pod<std::uint64_t>(field);
+    if (n != expected)
+      fail(field, "has " + std::to_string(n) + " values, expected " + std::to_string(expected));
+    need(n * sizeof(T), field);
+    std::vector<T> v(n);
+    if (n) std::memcpy(v.data(), b_.data() + pos_, n * sizeof(T));
+    pos_ += n * sizeof(T);
+    return v;
+  }
+  [[noreturn]] void fail(const char* field, const std::string& what) const {
+    throw std::runtime_error("checkpoint " + path_.string() + ": field '" + field + "' " + what);
+  }
+  bool at_end() const { return pos_ == b_.size(); }
+
+ private:
+  void need(std::uint64_t n, const char* field) const {
+    if (n > b_.size() - pos_) fail(field, "is truncated");
+  }
+  std::vector<unsigned char> b_;
+  std::size_t pos_ = 0;
+  std::filesystem::path path_;
+};
+
+template <class G>
+void write_model(CkptWriter& w, const GaussianModel<G, float>& m) {
+  w.vec(m.means); w.vec(m.log_scales); w.vec(m.quats); w.vec(m.opacity_logits); w.vec(m.sh);
+}
+
+template <class G>
+GaussianModel<G, float> read_model(CkptReader& r, std::uint64_t n) {
+  GaussianModel<G, float> m;
+  m.means = r.vec<float>("means", 3 * n);
+  m.log_scales = r.vec<float>("log_scales", 3 * n);
+  m.quats = r.vec<float>("quats", 4 * n);
+  m.opacity_logits = r.vec<float>("opacity_logits", n);
+  m.sh = r.vec<float>("sh", n * std::uint64_t(G::sh_floats));
+  return m;
+}
+
+}  // namespace detail
+
+/// Write `st` to `path` atomically.
+template <class G>
+void save_checkpoint(const std::filesystem::path& path, const TrainState<G>& st) {
+  detail::CkptWriter w;
+  for (char c : detail::kCheckpointMagic) w.pod(c);
+  w.pod(std::int32_t(G::bands));
+  w.pod(std::int32_t(G::sh_degree));
+  w.pod(std::int64_t(st.step));
+  w.pod(std::uint64_t(st.model.size()));
+  detail::write_model(w, st.model);
+  detail::write_model(w, st.exp_avg);
+  detail::write_model(w, st.exp_avg_sq);
+  w.pod(std::int64_t(st.adam_steps.means));
+  w.pod(std::int64_t(st.adam_steps.scales));
+  w.pod(std::int64_t(st.adam_steps.quats));
+  w.pod(std::int64_t(st.adam_steps.opacities));
+  for (auto s : st.adam_steps.sh) w.pod(std::int64_t(s));
+  w.pod(std::int64_t(st.adam_iteration));
+  w.pod(std::int32_t(st.stats_bands));
+  w.vec(st.stats_grad);
+  w.vec(st.stats_count);
+  w.vec(st.stats_radius);
+  io::write_text_atomic(path, w.bytes());
+}
+
+/// Read a checkpoint written by save_checkpoint for the same Gaussian type.
+template <class G>
+TrainState<G> load_checkpoint(const std::filesystem::path& path) {
+  detail::CkptReader r(io::read_bytes(path), path);
+  for (char c : detail::kCheckpointMagic)
+    if (r.pod<char>("magic") != c) r.fail("magic", "is not MSGSCKP1 (not an msgs checkpoint)");
+  const auto bands = r.pod<std::int32_t>("bands");
+  const auto deg = r.pod<std::int32_t>("sh_degree");
+  if (bands != G::bands || deg != G::sh_degree)
+    r.fail("bands", "describes Gaussian<" + std::to_string(bands) + ", " + std::to_string(deg) + ">, expected Gaussian<" +
+                        std::to_string(G::bands) + ", " + std::to_string(G::sh_degree) + ">");
+  TrainState<G> st;
+  st.step = r.pod<std::int64_t>("step");
+  const auto n = r.pod<std::uint64_t>("gaussians");
+  if (n > (std::uint64_t(1) << 34)) r.fail("gaussians", "is implausibly large");
+  st.model = detail::read_model<G>(r, n);
+  st.exp_avg = detail::read_model<G>(r, n);
+  st.exp_avg_sq = detail::read_model<G>(r, n);
+  st.adam_steps.means = r.pod<std::int64_t>("adam_steps");
+  st.adam_steps.scales = r.pod<std::int64_t>("adam_steps");
+  st.adam_steps.quats = r.pod<std::int64_t>("adam_steps");
+  st.adam_steps.opacities = r.pod<std::int64_t>("adam_steps");
+  for (auto& s : st.adam_steps.sh) s = r.pod<std::int64_t>("adam_steps");
+  st.adam_iteration = r.pod<std::int64_t>("adam_iteration");
+  st.stats_bands = r.pod<std::int32_t>("stats_bands");
+  if (st.stats_bands < 1 || st.stats_bands > 64) r.fail("stats_bands", "is out of range");
+  st.stats_grad = r.vec<float>("stats_grad", n * std::uint64_t(st.stats_bands));
+  st.stats_count = r.vec<std::uint32_t>("stats_count", n * std::uint64_t(st.stats_bands));
+  st.stats_radius = r.vec<float>("stats_radius", n);
+  if (!r.at_end()) r.fail("end", "has trailing bytes");
+  return st;
+}
+
+}  // namespace msgs

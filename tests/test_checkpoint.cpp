@@ -1,0 +1,123 @@
+// tests/test_checkpoint.cpp
+// Checkpoints: a run stopped at step k, saved, loaded into a fresh trainer and continued ends bit
+// for bit where the uninterrupted run ends (model, Adam state, densification statistics); the
+// file format refuses the wrong model type, truncation and trailing bytes.
+#include <doctest/doctest.h>
+
+#include <msgs/checkpoint.hpp>
+#include <msgs/run.hpp>
+#include <msgs/synth.hpp>
+
+#include <atomic>
+#include <cstring>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+
+namespace fs = std::filesystem;
+using namespace msgs;
+
+namespace {
+
+using G = Gaussian<7, 1>;
+
+fs::path scratch() {
+  const char* env = std::getenv("MSGS_TEST_TMP");
+  fs::path d = (env ? fs::path(env) : fs::temp_directory_path() / "msgs_test") / "checkpoint";
+  fs::create_directories(d);
+  return d;
+}
+
+const io::Dataset& tiny() {
+  static const io::Dataset ds = [] {
+    SynthOptions opt;
+    opt.preset = "tiny";
+    opt.seed = 3;
+    opt.overwrite = true;
+    write_synthetic_dataset(scratch() / "tiny", opt);
+    return io::load_dataset(scratch() / "tiny");
+  }();
+  return ds;
+}
+
+Trainer<G> make_trainer(const TrainOptions& opt = {}) {
+  // Joint-Optimized at a scale where refinement, an opacity reset and SpecDelay all fall inside
+  // the first 240 steps (refine every 6, spectral bands from step 120).
+  const StrategySpec s = parse_strategy("joint+specdelay+msad", ScheduleScale{0.004});
+  RunConfig cfg;
+  return Trainer<G>(tiny(), detail::run_bands(tiny(), {}), detail::initial_model<G>(tiny(), cfg), s.plan, s.hooks, opt);
+}
+
+bool same_bits(const std::vector<float>& a, const std::vector<float>& b) {
+  return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0);
+}
+
+void check_same(const TrainState<G>& a, const TrainState<G>& b) {
+  CHECK(a.step == b.step);
+  CHECK(a.model.size() == b.model.size());
+  CHECK(same_bits(a.model.means, b.model.means));
+  CHECK(same_bits(a.model.log_scales, b.model.log_scales));
+  CHECK(same_bits(a.model.quats, b.model.quats));
+  CHECK(same_bits(a.model.opacity_logits, b.model.opacity_logits));
+  CHECK(same_bits(a.model.sh, b.model.sh));
+  CHECK(same_bits(a.exp_avg.sh, b.exp_avg.sh));
+  CHECK(same_bits(a.exp_avg_sq.means, b.exp_avg_sq.means));
+  CHECK(a.adam_iteration == b.adam_iteration);
+  CHECK(a.adam_steps.sh == b.adam_steps.sh);
+  CHECK(same_bits(a.stats_grad, b.stats_grad));
+  CHECK(a.stats_count == b.stats_count);
+}
+
+}  // namespace
+
+TEST_CASE("a resumed run equals the uninterrupted run bit for bit") {
+  constexpr long long kEnd = 240, kStop = 131;  // the stop falls between refinements
+  Trainer<G> straight = make_trainer();
+  REQUIRE(straight.train(0, kEnd) == kEnd);
+  const TrainState<G> want = straight.state(kEnd);
+
+  // Interrupted run: stopped by the flag (as Ctrl-C does), checkpoint written on the way out.
+  const fs::path ckpt = scratch() / "joint.ckpt";
+  fs::remove(ckpt);
+  std::atomic<bool> stop{false};
+  TrainOptions opt;
+  opt.checkpoint_path = ckpt;
+  opt.stop = &stop;
+  opt.progress_every = 1;
+  opt.on_progress = [&](const TrainProgress& p) { if (p.step >= kStop) stop.store(true); };
+  Trainer<G> first = make_trainer(opt);
+  REQUIRE(first.train(0, kEnd) == kStop);
+  REQUIRE(fs::exists(ckpt));
+
+  Trainer<G> second = make_trainer();
+  const long long at = second.restore(load_checkpoint<G>(ckpt));
+  CHECK(at == kStop);
+  REQUIRE(second.train(at, kEnd) == kEnd);
+  check_same(second.state(kEnd), want);
+}
+
+TEST_CASE("checkpoint files refuse the wrong model type, truncation and trailing bytes") {
+  Trainer<G> t = make_trainer();
+  t.train(0, 20);
+  const fs::path p = scratch() / "small.ckpt";
+  save_checkpoint(p, t.state(20));
+  check_same(load_checkpoint<G>(p), t.state(20));
+
+  using Rgb = Gaussian<3, 1>;
+  CHECK_THROWS_WITH_AS(load_checkpoint<Rgb>(p), doctest::Contains("expected Gaussian<3"), std::runtime_error);
+
+  const auto bytes = io::read_bytes(p);
+  const fs::path cut = scratch() / "cut.ckpt";
+  io::write_bytes_atomic(cut, bytes.data(), bytes.size() - 7);
+  CHECK_THROWS_WITH_AS(load_checkpoint<G>(cut), doctest::Contains("truncated"), std::runtime_error);
+
+  auto longer = bytes;
+  longer.push_back(0);
+  const fs::path tail = scratch() / "tail.ckpt";
+  io::write_bytes_atomic(tail, longer.data(), longer.size());
+  CHECK_THROWS_WITH_AS(load_checkpoint<G>(tail), doctest::Contains("trailing"), std::runtime_error);
+
+  const fs::path junk = scratch() / "junk.ckpt";
+  io::write_text_atomic(junk, "not a checkpoint at all");
+  CHECK_THROWS_WITH_AS(load_checkpoint<G>(junk), doctest::Contains("magic"), std::runtime_error);
+}
