@@ -76,7 +76,7 @@ TEST_CASE("strategy_names lists the 15 configurations, each resolving to itself"
                               : n.rfind("split", 0) == 0  ? StrategyKind::Split
                                                           : StrategyKind::Joint;
     CHECK(s.plan.kind == want);
-    CHECK(s.plan.sig == false);  // SIG acts through its hook only; the flag is informational
+    CHECK(s.plan.sig == (n.find("+sig") != std::string::npos));  // reported with the run
   }
 }
 

@@ -128,6 +128,7 @@ struct MSAD : Modifier {
 /// colour. Densification statistics still accumulate from spectral steps.
 struct SIG : Modifier {
   static constexpr std::string_view name = "sig";
+  static void configure(TrainPlan& p) { p.sig = true; }
   static void pre_backward(const TrainPlan&, StepContext& c) {
     if (c.spectral) freeze_geometry(c.mask, true);
   }
