@@ -626,6 +626,7 @@ inline std::string gnuplot_script(const std::vector<RunSummary>& rows, const std
         "} else {\n"
         "  set terminal png size 860,540\n"
         "}\n"
+        "set termoption noenhanced\n"  // knob names such as sh_degree are not subscripts
         "set datafile missing \"?\"\n"
         "set logscale x\nset grid\nset key outside right top\n"
         "set xlabel \"wall time per run (s, log scale)\"\nset ylabel \"PSNR (dB), eval split\"\n";
@@ -655,6 +656,7 @@ inline std::string gnuplot_script(const std::vector<RunSummary>& rows, const std
     gp += "EOD\n";
   }
   const std::array<int, 7> point_types = {7, 5, 9, 11, 13, 15, 3};
+  const std::string label_col = std::to_string(2 + metric_columns);  // after seconds and the PSNR columns
   for (std::size_t c = 0; c < metric_columns; ++c) {
     std::vector<double> cost, q;
     for (const auto& s : rows) { cost.push_back(s.found ? s.seconds : std::nan("")); q.push_back(s.found ? s.psnr[c] : std::nan("")); }
@@ -671,7 +673,7 @@ inline std::string gnuplot_script(const std::vector<RunSummary>& rows, const std
       const std::string blk = "$knob" + std::to_string(k), col = std::to_string(2 + c);
       gp += ", \\\n     " + blk + " using 1:" + col + " with points pt " + std::to_string(point_types[k % point_types.size()]) +
             " ps 1.3 lc " + std::to_string(k + 1) + " title \"" + sanitize(knobs[k]) + "\"";
-      gp += ", \\\n     " + blk + " using 1:" + col + ":9 with labels offset char 0.6,0.6 left font \",7\" tc lt " +
+      gp += ", \\\n     " + blk + " using 1:" + col + ":" + label_col + " with labels offset char 0.6,0.6 left font \",7\" tc lt " +
             std::to_string(k + 1) + " notitle";
     }
     gp += "\nunset output\n";
