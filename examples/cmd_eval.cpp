@@ -65,6 +65,11 @@ int run_eval(const std::vector<std::string>& argv) {
   msgs::OutputStage stage(out);
   msgs::EvalOptions opt;
   opt.sheets = !args.flag("no-sheets");
+  opt.on_progress = [](std::size_t done, std::size_t total) {
+    std::fprintf(stderr, "\revaluating capture %zu/%zu ", done, total);
+    if (done == total) std::fprintf(stderr, "\n");
+    std::fflush(stderr);
+  };
   if (opt.sheets) fs::create_directories(stage.dir() / "sheets");
   const msgs::EvalResult res = msgs::evaluate_models(ds, models, opt.sheets ? stage.dir() / "sheets" : fs::path{}, opt);
 

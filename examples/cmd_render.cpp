@@ -97,6 +97,12 @@ int run_render(const std::vector<std::string>& argv) {
     }
   }
 
+  opt.on_progress = [](std::size_t done, std::size_t total) {
+    std::fprintf(stderr, "\rrendering frame %zu/%zu ", done, total);
+    if (done == total) std::fprintf(stderr, "\n");
+    std::fflush(stderr);
+  };
+
   msgs::OutputStage stage(out);
   const msgs::DatasetRenderSummary sum = msgs::render_dataset(ds, models, stage.dir(), opt);
   stage.commit();

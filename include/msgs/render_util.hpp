@@ -599,6 +599,7 @@ class ModelSet {
   void add_bands(const LoadedModel& m, std::size_t index) {
     const auto& names = m.info.band_names;
     const std::vector<std::string> joint = io::joint_channel_names();
+    const io::BandInfo& rgb = *io::find_band("D");
     if (names.empty()) {
       if (m.channels() == 1) {
         if (wildcard_)
@@ -606,8 +607,8 @@ class ModelSet {
                    io::cat("two single-band models without band names (also ", models_[wildcard_->model]->path.string(),
                            "): cannot tell which band each renders"));
         wildcard_ = BandSource{index, 0, 1};
-      } else if (m.channels() == 3) {
-        claim(io::standard_bands().front().id, BandSource{index, 0, 3}, m);
+      } else if (m.channels() == rgb.channels) {
+        claim(rgb.id, BandSource{index, 0, rgb.channels}, m);
       } else {  // the standard Joint layout
         for (const auto& b : io::standard_bands()) claim(b.id, BandSource{index, b.first_channel_in_joint, b.channels}, m);
       }
@@ -765,6 +766,8 @@ struct DatasetRenderOptions {
   int sh_degree = -1;              ///< render at most this SH degree; -1 = each model's own
   bool composites = true;          ///< CIR / NDVI / NDRE per capture where the bands exist
   bool legend = true;              ///< colour bar under NDVI / NDRE maps
+  /// Called after each rendered frame with (frames done, frames selected); may be empty.
+  std::function<void(std::size_t, std::size_t)> on_progress;
 };
 
 /// What render_dataset wrote.
@@ -821,6 +824,7 @@ inline DatasetRenderSummary render_dataset(const io::Dataset& ds, const ModelSet
       sum.files.push_back(stem + ".npy");
     }
     ++sum.frames;
+    if (opt.on_progress) opt.on_progress(sum.frames, selected.size());
   }
 
   if (!opt.composites) return sum;
@@ -874,6 +878,9 @@ struct EvalOptions {
   float error_scale = default_error_scale; ///< mean absolute error shown as white in error maps
   float index_error_scale = 0.5f;         ///< NDVI / NDRE difference shown as white
   int gap = 4;                            ///< pixels between contact-sheet cells
+  float fill = 0.35f;                     ///< grey between cells: error maps run from black to white
+  /// Called after each eval capture with (captures done, eval captures); may be empty.
+  std::function<void(std::size_t, std::size_t)> on_progress;
 };
 
 /// Per-band results of evaluate_models.
@@ -919,7 +926,11 @@ inline EvalResult evaluate_models(const io::Dataset& ds, const ModelSet& models,
       }
 
   const bool sheets = opt.sheets && !sheet_dir.empty();
-  for (const Capture& cap : group_captures(ds, eval_frames)) {
+  const std::vector<Capture> captures = group_captures(ds, eval_frames);
+  std::size_t done = 0;
+  for (const Capture& cap : captures) {
+    if (opt.on_progress && done > 0) opt.on_progress(done, captures.size());
+    ++done;
     struct View { std::string band; Image<float> gt, render, error; };
     std::vector<View> views;
     for (const auto& b : io::standard_bands()) {
@@ -992,9 +1003,10 @@ inline EvalResult evaluate_models(const io::Dataset& ds, const ModelSet& models,
       }
     }
     const std::string name = "sheet_" + cap.key + ".png";
-    io::write_png8(sheet_dir / name, contact_sheet(rows, opt.gap));
+    io::write_png8(sheet_dir / name, contact_sheet(rows, opt.gap, opt.fill));
     res.files.push_back(name);
   }
+  if (opt.on_progress) opt.on_progress(captures.size(), captures.size());
   return res;
 }
 
