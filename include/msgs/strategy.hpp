@@ -82,6 +82,16 @@ inline void freeze_geometry(AdamMask& m, bool opacity) {
   if (opacity) m.opacities = false;
 }
 
+/// Smallest refinement interval a scaled schedule may use. Statistics averaged over fewer views are
+/// single-view noise: at scale 0.005 the interval would round to 1 step and the Gaussian count
+/// grows every step (150k on a 96x72 image in minutes). The opacity reset keeps its 30x ratio.
+inline constexpr int kMinRefineEvery = 5;
+
+inline void floor_refine_interval(DensifyConfig& d) {
+  if (d.refine_every < kMinRefineEvery) d.refine_every = kMinRefineEvery;
+  if (d.reset_every > 0 && d.reset_every < 30 * d.refine_every) d.reset_every = 30 * d.refine_every;
+}
+
 /// SpecDelay: RGB only for the first 30k steps; densification paused in (29k, 32k]; spectral
 /// colours then warm up for 2k steps with geometry frozen (paper Sec. 3.2.4 and 4.3).
 struct SpecDelay : Modifier {
@@ -121,6 +131,7 @@ struct MSAD : Modifier {
     d.refine_every = m.refine_every;
     d.reset_every = m.reset_every;
     d.refine_stop = p.scale(60000);
+    floor_refine_interval(d);
   }
 };
 
@@ -143,7 +154,9 @@ inline DensifyConfig baseline_densify(const ScheduleScale& s) {
   c.refine_every = 100;
   c.reset_every = 3000;
   c.refine_stop = 15000;
-  return c.scaled(s);
+  c = c.scaled(s);
+  floor_refine_interval(c);
+  return c;
 }
 
 namespace detail {
