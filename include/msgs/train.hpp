@@ -228,6 +228,7 @@ class Trainer {
 
       // 4. Backward.
       raster.backward(d_image, nullptr, nullptr, grads);
+      if (opt_.check_finite) check_finite_gradients(step, grads);
       if (opt_.scale_reg_every > 0 && step % opt_.scale_reg_every == 0)
         scale_reg<float>(std::span<const float>(model_.log_scales), std::span<float>(grads.model.log_scales),
                          opt_.scale_reg);
@@ -350,6 +351,21 @@ class Trainer {
     check(model_.quats, "quaternion");
     check(model_.opacity_logits, "opacity logit");
     check(model_.sh, "SH coefficient");
+  }
+
+  void check_finite_gradients(long long step, const Gradients<G, float>& g) const {
+    auto check = [&](const std::vector<float>& v, const char* name) {
+      for (float x : v)
+        if (!std::isfinite(x))
+          throw std::runtime_error("training produced a non-finite gradient of " + std::string(name) + " at step " +
+                                   std::to_string(step));
+    };
+    check(g.model.means, "means");
+    check(g.model.log_scales, "log-scales");
+    check(g.model.quats, "quaternions");
+    check(g.model.opacity_logits, "opacity logits");
+    check(g.model.sh, "SH coefficients");
+    check(g.mean2d, "screen-space means");
   }
 
   const io::Dataset* ds_;
