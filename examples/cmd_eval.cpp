@@ -34,16 +34,7 @@ constexpr const char* kUsage =
 constexpr const char* kLpipsNote =
     "LPIPS is not computed: it needs pretrained network weights, which cannot be obtained offline.";
 
-std::vector<std::string> split_list(const std::string& s) {
-  std::vector<std::string> out;
-  std::string cur;
-  for (char c : s) {
-    if (c == ',') { if (!cur.empty()) out.push_back(cur); cur.clear(); }
-    else cur += c;
-  }
-  if (!cur.empty()) out.push_back(cur);
-  return out;
-}
+using msgs::cli::split_list;
 
 int run_eval(const std::vector<std::string>& argv) {
   const msgs::cli::Args args(argv, {"data", "model", "out", "bands"}, {"help", "no-orient", "no-sheets"});

@@ -38,16 +38,7 @@ constexpr const char* kUsage =
     "  --no-orient         the model was trained with --no-orient (dataset coordinates as stored)\n"
     "Nothing is written unless every output is complete.\n";
 
-std::vector<std::string> split_list(const std::string& s) {
-  std::vector<std::string> out;
-  std::string cur;
-  for (char c : s) {
-    if (c == ',') { if (!cur.empty()) out.push_back(cur); cur.clear(); }
-    else cur += c;
-  }
-  if (!cur.empty()) out.push_back(cur);
-  return out;
-}
+using msgs::cli::split_list;
 
 std::vector<float> parse_background(const std::string& s) {
   std::vector<float> out;

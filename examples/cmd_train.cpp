@@ -41,16 +41,7 @@ constexpr const char* kUsage =
 std::atomic<bool> g_stop{false};
 void on_sigint(int) { g_stop.store(true); }
 
-std::vector<std::string> split_list(const std::string& s) {
-  std::vector<std::string> out;
-  std::string cur;
-  for (char c : s) {
-    if (c == ',') { if (!cur.empty()) out.push_back(cur); cur.clear(); }
-    else cur += c;
-  }
-  if (!cur.empty()) out.push_back(cur);
-  return out;
-}
+using msgs::cli::split_list;
 
 int run_train(const std::vector<std::string>& argv) {
   const msgs::cli::Args args(argv, {"data", "out", "strategy", "scale", "sh-degree", "bands", "seed", "checkpoint-every"},

@@ -92,6 +92,22 @@ class Args {
   std::vector<std::string> positional_;
 };
 
+/// "a,b,,c" -> {"a", "b", "c"}: comma-separated option values (band lists, backgrounds).
+inline std::vector<std::string> split_list(const std::string& s) {
+  std::vector<std::string> out;
+  std::string cur;
+  for (char c : s) {
+    if (c == ',') {
+      if (!cur.empty()) out.push_back(cur);
+      cur.clear();
+    } else {
+      cur += c;
+    }
+  }
+  if (!cur.empty()) out.push_back(cur);
+  return out;
+}
+
 }  // namespace msgs::cli
 
 #define MSGS_CONCAT_INNER(a, b) a##b
