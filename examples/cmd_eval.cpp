@@ -15,7 +15,7 @@
 namespace {
 
 constexpr const char* kUsage =
-    "usage: msgs eval --data DIR --model PLY|DIR [--out DIR] [--bands LIST] [--no-orient] [--no-sheets]\n"
+    "usage: msgs eval --data DIR --model PLY|DIR [--out DIR] [--bands LIST] [--orient none|center] [--no-sheets]\n"
     "\n"
     "Evaluate a trained model on the dataset's eval split at full resolution, with the reference\n"
     "evaluation background (grey 0.149, 0.165, 0.216; its luminance for single bands) and renders\n"
@@ -28,7 +28,7 @@ constexpr const char* kUsage =
     "\n"
     "  --model PLY|DIR     a model PLY or a directory of model_*.ply files (see `msgs render --help`)\n"
     "  --bands LIST        only these bands (comma separated ids)\n"
-    "  --no-orient         the model was trained with --no-orient\n"
+    "  --orient none       the model was trained with --orient none (or --no-orient)\n"
     "  --no-sheets         metrics only\n";
 
 constexpr const char* kLpipsNote =
@@ -37,7 +37,7 @@ constexpr const char* kLpipsNote =
 using msgs::cli::split_list;
 
 int run_eval(const std::vector<std::string>& argv) {
-  const msgs::cli::Args args(argv, {"data", "model", "out", "bands"}, {"help", "no-orient", "no-sheets"});
+  const msgs::cli::Args args(argv, {"data", "model", "out", "bands", "orient"}, {"help", "no-orient", "no-sheets"});
   if (args.flag("help")) { std::fputs(kUsage, stdout); return 0; }
   if (!args.positional().empty()) throw msgs::cli::UsageError("unexpected argument '" + args.positional()[0] + "'");
   namespace fs = std::filesystem;
@@ -47,7 +47,7 @@ int run_eval(const std::vector<std::string>& argv) {
   const fs::path out = args.has("out") ? fs::path(args.get("out")) : (model_dir.empty() ? fs::path(".") : model_dir) / "eval";
 
   msgs::io::LoadOptions lo;
-  lo.orient_and_center = !args.flag("no-orient");
+  lo.orient_and_center = msgs::cli::orient_and_center(args);
   lo.bands = split_list(args.get("bands"));
   lo.load_points = false;
   const msgs::io::Dataset ds = msgs::io::load_dataset(data, lo);

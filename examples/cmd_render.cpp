@@ -15,7 +15,7 @@ namespace {
 
 constexpr const char* kUsage =
     "usage: msgs render --data DIR --model PLY|DIR --out DIR [--split train|eval|all] [--float]\n"
-    "                   [--background V|V1,V2,..] [--sh-degree D] [--bands LIST] [--no-orient]\n"
+    "                   [--background V|V1,V2,..] [--sh-degree D] [--bands LIST] [--orient none|center]\n"
     "                   [--no-composites] [--no-legend]\n"
     "\n"
     "Render every frame of the dataset (or one split) with its own camera at full resolution:\n"
@@ -35,7 +35,8 @@ constexpr const char* kUsage =
     "                      in Joint order D_R,D_G,D_B,MS_G,MS_R,MS_RE,MS_NIR (default 0)\n"
     "  --sh-degree D       render at most SH degree D (default: the model's)\n"
     "  --bands LIST        only these bands (comma separated ids)\n"
-    "  --no-orient         the model was trained with --no-orient (dataset coordinates as stored)\n"
+    "  --orient none       the model was trained with --orient none (dataset coordinates as stored;\n"
+    "                      --no-orient is the same)\n"
     "Nothing is written unless every output is complete.\n";
 
 using msgs::cli::split_list;
@@ -54,7 +55,7 @@ std::vector<float> parse_background(const std::string& s) {
 }
 
 int run_render(const std::vector<std::string>& argv) {
-  const msgs::cli::Args args(argv, {"data", "model", "out", "split", "background", "sh-degree", "bands"},
+  const msgs::cli::Args args(argv, {"data", "model", "out", "split", "background", "sh-degree", "bands", "orient"},
                              {"help", "float", "no-orient", "no-composites", "no-legend"});
   if (args.flag("help")) { std::fputs(kUsage, stdout); return 0; }
   if (!args.positional().empty()) throw msgs::cli::UsageError("unexpected argument '" + args.positional()[0] + "'");
@@ -74,7 +75,7 @@ int run_render(const std::vector<std::string>& argv) {
   opt.sh_degree = int(deg);
 
   msgs::io::LoadOptions lo;
-  lo.orient_and_center = !args.flag("no-orient");
+  lo.orient_and_center = msgs::cli::orient_and_center(args);
   lo.bands = split_list(args.get("bands"));
   lo.load_points = false;
   const msgs::io::Dataset ds = msgs::io::load_dataset(data, lo);

@@ -17,7 +17,7 @@ namespace {
 
 constexpr const char* kUsage =
     "usage: msgs train --data DIR --out DIR [--strategy NAME] [--scale F] [--sh-degree D]\n"
-    "                  [--bands D,MS_G,...] [--seed S] [--no-orient] [--resume] [--checkpoint-every N]\n"
+    "                  [--bands D,MS_G,...] [--seed S] [--orient none|center] [--resume] [--checkpoint-every N]\n"
     "\n"
     "Train Gaussian splats on a multi-spectral dataset (nerfstudio-style layout) with one of the\n"
     "paper's strategies, evaluate every band on the eval split and write to DIR:\n"
@@ -32,7 +32,9 @@ constexpr const char* kUsage =
     "  --sh-degree D     spherical-harmonics degree 0..3 (default 3)\n"
     "  --bands LIST      train only these bands (comma separated ids)\n"
     "  --seed S          seed of sampling, backgrounds and initial colours (default 0)\n"
-    "  --no-orient       keep the dataset's coordinates (no re-orientation and centring)\n"
+    "  --orient MODE     center (default: mean camera up -> +z, mean camera position -> origin,\n"
+    "                    recorded as `transform` in result.json) or none (keep the dataset's coordinates;\n"
+    "                    --no-orient is the same)\n"
     "  --checkpoint-every N  also checkpoint every N steps (always at the end and on Ctrl-C)\n"
     "  --resume          continue from DIR/checkpoints/*.ckpt; the result equals an uninterrupted run\n"
     "Ctrl-C stops after the current step, writes a checkpoint, the models and the metrics;\n"
@@ -44,7 +46,8 @@ void on_sigint(int) { g_stop.store(true); }
 using msgs::cli::split_list;
 
 int run_train(const std::vector<std::string>& argv) {
-  const msgs::cli::Args args(argv, {"data", "out", "strategy", "scale", "sh-degree", "bands", "seed", "checkpoint-every"},
+  const msgs::cli::Args args(argv,
+                             {"data", "out", "strategy", "scale", "sh-degree", "bands", "seed", "checkpoint-every", "orient"},
                              {"help", "no-orient", "quiet", "resume"});
   if (args.flag("help")) { std::fputs(kUsage, stdout); return 0; }
   if (!args.positional().empty()) throw msgs::cli::UsageError("unexpected argument '" + args.positional()[0] + "'");
@@ -69,7 +72,7 @@ int run_train(const std::vector<std::string>& argv) {
   }
 
   msgs::io::LoadOptions lo;
-  lo.orient_and_center = !args.flag("no-orient");
+  lo.orient_and_center = msgs::cli::orient_and_center(args);
   const msgs::io::Dataset ds = msgs::io::load_dataset(data, lo);
 
   std::vector<std::string> band_ids = cfg.bands.empty() ? ds.bands() : cfg.bands;

@@ -92,6 +92,14 @@ class Args {
   std::vector<std::string> positional_;
 };
 
+/// Pose re-orientation from `--orient none|center` (default center: mean up becomes +z, mean
+/// camera position the origin) or the older `--no-orient` flag.
+inline bool orient_and_center(const Args& args) {
+  const std::string o = args.get("orient", "center");
+  if (o != "none" && o != "center") throw UsageError("--orient expects none or center, got '" + o + "'");
+  return o == "center" && !args.flag("no-orient");
+}
+
 /// "a,b,,c" -> {"a", "b", "c"}: comma-separated option values (band lists, backgrounds).
 inline std::vector<std::string> split_list(const std::string& s) {
   std::vector<std::string> out;
