@@ -30,6 +30,9 @@ constexpr const char* kUsage =
     "  --scale F         multiply every iteration count of the paper's schedule (default 0.05:\n"
     "                    a 6000-step Joint run)\n"
     "  --sh-degree D     spherical-harmonics degree 0..3 (default 3)\n"
+    "  --densify P       msgs (default: the multi-spectral implementation's ADC, absgrad 0.0008, prune\n"
+    "                    opacity < 0.1, reset to 0.2) or gsplat (3DGS/gsplat: grad 0.0002, prune < 0.005,\n"
+    "                    reset to 0.01); MSAD and ExtADC modify either as in the paper\n"
     "  --bands LIST      train only these bands (comma separated ids)\n"
     "  --seed S          seed of sampling, backgrounds and initial colours (default 0)\n"
     "  --orient MODE     center (default: mean camera up -> +z, mean camera position -> origin,\n"
@@ -47,7 +50,7 @@ using msgs::cli::split_list;
 
 int run_train(const std::vector<std::string>& argv) {
   const msgs::cli::Args args(argv,
-                             {"data", "out", "strategy", "scale", "sh-degree", "bands", "seed", "checkpoint-every", "orient"},
+                             {"data", "out", "strategy", "scale", "sh-degree", "bands", "seed", "checkpoint-every", "orient", "densify"},
                              {"help", "no-orient", "quiet", "resume"});
   if (args.flag("help")) { std::fputs(kUsage, stdout); return 0; }
   if (!args.positional().empty()) throw msgs::cli::UsageError("unexpected argument '" + args.positional()[0] + "'");
@@ -62,6 +65,11 @@ int run_train(const std::vector<std::string>& argv) {
   cfg.train.seed = std::uint64_t(args.integer("seed", 0));
   cfg.init.seed = std::uint32_t(cfg.train.seed);
   cfg.resume = args.flag("resume");
+  try {
+    cfg.densify = msgs::parse_densify_preset(args.get("densify", "msgs"));
+  } catch (const std::invalid_argument& e) {
+    throw msgs::cli::UsageError(e.what());
+  }
   const long every = args.integer("checkpoint-every", 0);
   if (every < 0) throw msgs::cli::UsageError("--checkpoint-every must be >= 0");
   cfg.train.checkpoint_every = int(every);

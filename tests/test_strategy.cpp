@@ -278,3 +278,26 @@ TEST_CASE("SpecDelay: spectral bands disabled before spectral_start, colour-only
   const StrategySpec j = parse_strategy("joint+msad", ScheduleScale{0.05});
   CHECK(j.hooks.band_enabled(j.plan, 0, true));
 }
+
+TEST_CASE("the gsplat/3DGS densification preset is the base the modifiers change") {
+  const TrainPlan g = parse_strategy("joint", ScheduleScale{}, DensifyPreset::Gsplat).plan;
+  CHECK(g.densify.grow_grad2d == doctest::Approx(0.0002));
+  CHECK_FALSE(g.densify.absgrad);
+  CHECK_FALSE(g.densify.per_band);
+  CHECK(g.densify.prune_opacity == doctest::Approx(0.005));
+  CHECK(g.densify.reset_opacity == doctest::Approx(0.01));
+  CHECK(g.densify.refine_every == 100);
+  CHECK(g.densify.reset_every == 3000);
+  CHECK(g.densify.refine_stop == 15000);
+  const TrainPlan m = parse_strategy("joint+msad", ScheduleScale{}, DensifyPreset::Gsplat).plan;
+  CHECK(m.densify.per_band);
+  CHECK(m.densify.absgrad);
+  CHECK(m.densify.grow_grad2d == doctest::Approx(0.0008));
+  CHECK(m.densify.refine_stop == 60000);
+  CHECK(parse_strategy("joint+extadc", ScheduleScale{}, DensifyPreset::Gsplat).plan.densify.refine_stop == 60000);
+  // The default stays the multi-spectral implementation's.
+  CHECK(parse_strategy("joint").plan.densify.grow_grad2d == doctest::Approx(0.0008));
+  CHECK(parse_densify_preset("gsplat") == DensifyPreset::Gsplat);
+  CHECK(parse_densify_preset("msgs") == DensifyPreset::MultiSpectral);
+  CHECK_THROWS_AS(parse_densify_preset("fast"), std::invalid_argument);
+}

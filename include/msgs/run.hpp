@@ -27,6 +27,9 @@ namespace msgs {
 struct RunConfig {
   std::string strategy = "joint+specdelay+msad";  ///< run-time strategy name (see strategy_names())
   double scale = 1.0;                 ///< schedule scale: multiplies every iteration count
+  /// Density control the modifiers start from: the multi-spectral implementation's (default) or
+  /// gsplat's / 3DGS's. MSAD and ExtADC then change it as in the paper.
+  DensifyPreset densify = DensifyPreset::MultiSpectral;
   std::vector<std::string> bands;     ///< bands to train (empty: every band of the dataset)
   TrainOptions train{};               ///< seed, learning rates, callbacks
   InitConfig init{};                  ///< initialisation from the sparse point cloud
@@ -156,7 +159,7 @@ RunResult run_experiment(const io::Dataset& ds, const RunConfig& cfg, const std:
   const auto t0 = clock::now();
   ScheduleScale scale{cfg.scale};
   scale.validate();
-  const StrategySpec spec = parse_strategy(cfg.strategy, scale);
+  const StrategySpec spec = parse_strategy(cfg.strategy, scale, cfg.densify);
   RunResult res;
   res.strategy = spec.plan.name;
   res.plan = spec.plan;

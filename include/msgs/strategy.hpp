@@ -145,18 +145,33 @@ struct SIG : Modifier {
   }
 };
 
-/// Densification of the baseline (nerfstudio splatfacto, on which the paper builds): one
-/// accumulator of the absolute gradient, threshold 0.0008, refine every 100 steps until 15k,
-/// opacity reset every 3000 steps to 0.2, prune opacity < 0.1.
-inline DensifyConfig baseline_densify(const ScheduleScale& s) {
-  DensifyConfig c = DensifyConfig::msad();
-  c.per_band = false;
-  c.refine_every = 100;
-  c.reset_every = 3000;
-  c.refine_stop = 15000;
+/// Which adaptive density control the modifiers start from.
+enum class DensifyPreset {
+  MultiSpectral,  ///< the multi-spectral implementation (nerfstudio splatfacto), the default
+  Gsplat,         ///< gsplat's DefaultStrategy / original 3DGS: 0.0002 on the plain gradient, prune < 0.005
+};
+
+/// Densification of the baseline. MultiSpectral (nerfstudio splatfacto, on which the paper builds):
+/// one accumulator of the absolute gradient, threshold 0.0008, refine every 100 steps until 15k,
+/// opacity reset every 3000 steps to 0.2, prune opacity < 0.1. Gsplat: DensifyConfig::gsplat_default().
+inline DensifyConfig baseline_densify(const ScheduleScale& s, DensifyPreset preset = DensifyPreset::MultiSpectral) {
+  DensifyConfig c = preset == DensifyPreset::Gsplat ? DensifyConfig::gsplat_default() : DensifyConfig::msad();
+  if (preset == DensifyPreset::MultiSpectral) {
+    c.per_band = false;
+    c.refine_every = 100;
+    c.reset_every = 3000;
+    c.refine_stop = 15000;
+  }
   c = c.scaled(s);
   floor_refine_interval(c);
   return c;
+}
+
+/// "msgs" / "multispectral" or "gsplat" / "3dgs".
+inline DensifyPreset parse_densify_preset(std::string_view name) {
+  if (name == "msgs" || name == "multispectral" || name == "splatfacto") return DensifyPreset::MultiSpectral;
+  if (name == "gsplat" || name == "3dgs") return DensifyPreset::Gsplat;
+  throw std::invalid_argument("unknown densification preset '" + std::string(name) + "'; valid: msgs, gsplat");
 }
 
 namespace detail {
@@ -196,7 +211,7 @@ struct StrategyBase {
   using modifiers = detail::ModifierSet<Mods...>;
   static constexpr StrategyKind kind = Kind;
   static std::string name() { return std::string(to_string(Kind)) + modifiers::suffix(); }
-  static TrainPlan plan(const ScheduleScale& scale = {}) {
+  static TrainPlan plan(const ScheduleScale& scale = {}, DensifyPreset preset = DensifyPreset::MultiSpectral) {
     TrainPlan p;
     p.kind = Kind;
     p.scale = scale;
@@ -204,7 +219,7 @@ struct StrategyBase {
     TrainSchedule sched;
     sched.total_steps = Kind == StrategyKind::Split ? 2 * StageSteps : StageSteps;
     p.schedule = sched.scaled(scale);
-    p.densify = baseline_densify(scale);
+    p.densify = baseline_densify(scale, preset);
     p.name = name();
     modifiers::configure(p);
     return p;
@@ -296,14 +311,15 @@ inline std::vector<std::string> strategy_names() {
 
 /// Resolve a run-time name ("separate", "split+extadc", "joint+specdelay+msad", "joint-optimized",
 /// modifiers in any order). Throws std::invalid_argument listing the valid names otherwise.
-inline StrategySpec parse_strategy(std::string_view name, const ScheduleScale& scale = {}) {
+inline StrategySpec parse_strategy(std::string_view name, const ScheduleScale& scale = {},
+                                   DensifyPreset preset = DensifyPreset::MultiSpectral) {
   const std::string canon = detail::canonical_strategy_name(name);
   StrategySpec spec;
   bool found = false;
   detail::for_each_strategy([&](auto s) {
     using T = decltype(s);
     if (!found && T::name() == canon) {
-      spec.plan = T::plan(scale);
+      spec.plan = T::plan(scale, preset);
       spec.hooks = T::hooks();
       found = true;
     }
