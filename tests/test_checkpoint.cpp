@@ -4,6 +4,8 @@
 // file format refuses the wrong model type, truncation and trailing bytes.
 #include <doctest/doctest.h>
 
+#include "fixtures.hpp"
+
 #include <msgs/checkpoint.hpp>
 #include <msgs/run.hpp>
 #include <msgs/synth.hpp>
@@ -21,24 +23,9 @@ namespace {
 
 using G = Gaussian<7, 1>;
 
-fs::path scratch() {
-  const char* env = std::getenv("MSGS_TEST_TMP");
-  fs::path d = (env ? fs::path(env) : fs::temp_directory_path() / "msgs_test") / "checkpoint";
-  fs::create_directories(d);
-  return d;
-}
+fs::path scratch() { return msgs::testing::scratch_dir("checkpoint"); }
 
-const io::Dataset& tiny() {
-  static const io::Dataset ds = [] {
-    SynthOptions opt;
-    opt.preset = "tiny";
-    opt.seed = 3;
-    opt.overwrite = true;
-    write_synthetic_dataset(scratch() / "tiny", opt);
-    return io::load_dataset(scratch() / "tiny");
-  }();
-  return ds;
-}
+const io::Dataset& tiny() { return msgs::testing::tiny_scene("checkpoint", 3); }
 
 Trainer<G> make_trainer(const TrainOptions& opt = {}) {
   // Joint-Optimized at a scale where refinement, an opacity reset and SpecDelay all fall inside

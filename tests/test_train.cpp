@@ -4,6 +4,8 @@
 // the SpecDelay densification pause, and a short training run that must converge without NaN.
 #include <doctest/doctest.h>
 
+#include "fixtures.hpp"
+
 #include <msgs/run.hpp>
 #include <msgs/synth.hpp>
 
@@ -25,27 +27,8 @@ namespace {
 using G = Gaussian<7, 1>;
 using Model = GaussianModel<G, float>;
 
-fs::path scratch_dir() {
-  const char* env = std::getenv("MSGS_TEST_TMP");
-  fs::path d = env ? fs::path(env) : fs::temp_directory_path() / "msgs_test";
-  d /= "train";
-  fs::create_directories(d);
-  return d;
-}
-
 /// The tiny synthetic scene, generated once per process.
-const io::Dataset& tiny() {
-  static const io::Dataset ds = [] {
-    SynthOptions opt;
-    opt.preset = "tiny";
-    opt.seed = 1;
-    opt.overwrite = true;
-    const fs::path root = scratch_dir() / "tiny";
-    write_synthetic_dataset(root, opt);
-    return io::load_dataset(root);
-  }();
-  return ds;
-}
+const io::Dataset& tiny() { return msgs::testing::tiny_scene("train", 1); }
 
 /// The five bands of the Joint layout: D -> channels 0..2, MS_G 3, MS_R 4, MS_RE 5, MS_NIR 6.
 std::vector<TrainBand> joint_bands() { return detail::run_bands(tiny(), {}); }

@@ -4,6 +4,8 @@
 // over to the band models exactly, Joint trains one 7-channel model.
 #include <doctest/doctest.h>
 
+#include "fixtures.hpp"
+
 #include <msgs/run.hpp>
 #include <msgs/synth.hpp>
 
@@ -23,27 +25,10 @@ namespace {
 // SH degree 0 throughout: run_experiment<0> instantiates the <7>, <3> and <1> trainers once.
 constexpr int kDeg = 0;
 
-fs::path scratch_dir() {
-  const char* env = std::getenv("MSGS_TEST_TMP");
-  fs::path d = env ? fs::path(env) : fs::temp_directory_path() / "msgs_test";
-  d /= "train_run";
-  fs::create_directories(d);
-  return d;
-}
+fs::path scratch_dir() { return msgs::testing::scratch_dir("train_run"); }
 
 /// The tiny synthetic scene, generated once per process.
-const io::Dataset& tiny() {
-  static const io::Dataset ds = [] {
-    SynthOptions opt;
-    opt.preset = "tiny";
-    opt.seed = 3;
-    opt.overwrite = true;
-    const fs::path root = scratch_dir() / "tiny";
-    write_synthetic_dataset(root, opt);
-    return io::load_dataset(root);
-  }();
-  return ds;
-}
+const io::Dataset& tiny() { return msgs::testing::tiny_scene("train_run", 3); }
 
 /// A fresh, empty output directory.
 fs::path out_dir(const std::string& name) {
