@@ -875,6 +875,10 @@ inline DatasetRenderSummary render_dataset(const io::Dataset& ds, const ModelSet
 /// What evaluate_models does.
 struct EvalOptions {
   bool sheets = true;                     ///< write a contact sheet per eval capture
+  /// Sheets for at most this many eval captures, the first ones in capture order (group_captures
+  /// of the eval frames, i.e. file order); -1 = every eval capture, 0 = none. Metrics always
+  /// cover every eval frame.
+  int max_sheets = -1;
   float error_scale = default_error_scale; ///< mean absolute error shown as white in error maps
   float index_error_scale = 0.5f;         ///< NDVI / NDRE difference shown as white
   int gap = 4;                            ///< pixels between contact-sheet cells
@@ -894,12 +898,17 @@ struct EvalResult {
 /// PSNR and SSIM of every eval frame whose band a model renders, at full resolution with the
 /// reference evaluation background (eval_background) and renders clamped to [0, 1], exactly as
 /// Trainer::evaluate. With `sheet_dir` non-empty and opt.sheets, one `sheet_<capture>.png` per
-/// eval capture: a row per band of ground truth | render | error map, then rows for CIR, NDVI and
-/// NDRE of ground truth | render (all from the NIR camera) | difference, where the bands exist.
+/// eval capture (the first opt.max_sheets captures when that is >= 0): a row per band of ground
+/// truth | render | error map, then rows for CIR, NDVI and NDRE of ground truth | render (all from
+/// the NIR camera) | difference, where the bands exist. Sheets are written straight into
+/// `sheet_dir`, each file atomically (stage the directory with OutputStage for all-or-nothing).
 /// Ground-truth composites combine the bands' own images (one size required; they come from
 /// slightly different viewpoints, as the cameras do).
 inline EvalResult evaluate_models(const io::Dataset& ds, const ModelSet& models,
                                   const std::filesystem::path& sheet_dir = {}, const EvalOptions& opt = {}) {
+  if (opt.max_sheets < -1)
+    throw std::invalid_argument("evaluate_models: max_sheets must be -1 (every capture) or >= 0, got " +
+                                std::to_string(opt.max_sheets));
   EvalResult res;
   std::vector<std::size_t> eval_frames;
   std::set<std::string> skipped;
@@ -930,6 +939,8 @@ inline EvalResult evaluate_models(const io::Dataset& ds, const ModelSet& models,
   std::size_t done = 0;
   for (const Capture& cap : captures) {
     if (opt.on_progress && done > 0) opt.on_progress(done, captures.size());
+    // Captures come in a fixed order, so "the first max_sheets" is the same set on every run.
+    const bool sheet = sheets && (opt.max_sheets < 0 || done < std::size_t(opt.max_sheets));
     ++done;
     struct View { std::string band; Image<float> gt, render, error; };
     std::vector<View> views;
@@ -946,12 +957,12 @@ inline EvalResult evaluate_models(const io::Dataset& ds, const ModelSet& models,
       m.psnr.push_back(psnr(v.render, v.gt));
       m.ssim.push_back(ssim(v.render, v.gt));
       res.frames[slot.at(b.id)].push_back(f.file_path);
-      if (sheets) {
+      if (sheet) {
         v.error = error_map(v.render, v.gt, opt.error_scale);
         views.push_back(std::move(v));
       }
     }
-    if (!sheets) continue;
+    if (!sheet) continue;
 
     SheetCells rows;
     for (const View& v : views) rows.push_back({&v.gt, &v.render, &v.error});
