@@ -23,7 +23,9 @@
 
 #include "commands.hpp"
 #include "experiment.hpp"
+#include "render_dispatch.hpp"
 #include "report.hpp"
+#include "run_sheets.hpp"
 
 namespace {
 
@@ -42,7 +44,8 @@ constexpr const char* kUsage =
     "             SH degree 0..3, scale F/4..2F, strategy, Joint modifiers, band count 1..5\n"
     "  collect    rebuild the tables of DIR from DIR/study.json and DIR/runs/*/result.json\n"
     "\n"
-    "Writes into DIR: study.json (the run list), runs/<id>/ (result.json, metrics.md, model PLYs),\n"
+    "Writes into DIR: study.json (the run list), runs/<id>/ (result.json, metrics.md, model PLYs,\n"
+    "sheets/sheet_<n>.png: contact sheets of the first 3 eval captures, as `msgs train`),\n"
     "summary.csv, summary.md, summary.json, <study>.gp and <study>_<band>.png (PSNR against wall\n"
     "time, Pareto front marked; needs gnuplot, else run `gnuplot <study>.gp` in DIR later).\n"
     "\n"
@@ -245,13 +248,19 @@ int run_study(const std::vector<std::string>& argv) {
           if (!quiet) cfg.train.on_progress = [&](const msgs::TrainProgress& p) { msgs::cli::print_progress(p, band_ids, ""); };
           const msgs::RunResult res = msgs::cli::run_experiment_any(r.sh_degree, ds, cfg, dir);
           write_run_result(dir, res, r, data, ds, omp_threads());
+          std::string sheet_note;
+          try {  // after result.json, as `msgs train` does; a failure here does not fail the run
+            (void)msgs::cli::write_run_sheets(ds, res, dir, msgs::cli::default_run_sheets, msgs::cli::make_any_renderer);
+          } catch (const std::exception& e) {
+            sheet_note = std::string("  (contact sheets not written: ") + e.what() + ")";
+          }
           char buf[160];
           std::snprintf(buf, sizeof buf, "All %.2f dB  RGB %.2f dB  %.1f s  %zu Gaussians%s",
                         msgs::cli::all_bands_mean(res.metrics, true),
                         res.metrics.empty() ? std::nan("") : msgs::BandMetrics::mean(res.metrics[0].psnr), res.seconds,
                         [&] { std::size_t n = 0; for (const auto& [k, v] : res.gaussians) n += v; return n; }(),
                         res.interrupted ? "  (interrupted)" : "");
-          line = buf;
+          line = buf + sheet_note;
         } catch (const std::exception& e) {
           errors[i] = e.what();
           line = std::string("FAILED: ") + e.what();

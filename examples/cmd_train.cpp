@@ -1,9 +1,11 @@
 // examples/cmd_train.cpp
 // `msgs train`: train a strategy on a dataset and write models, configuration and per-band metrics.
+#include <algorithm>
 #include <atomic>
 #include <csignal>
 #include <cstdio>
 #include <filesystem>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -11,19 +13,25 @@
 
 #include "commands.hpp"
 #include "experiment.hpp"
+#include "render_dispatch.hpp"
 #include "report.hpp"
+#include "run_sheets.hpp"
 
 namespace {
 
 constexpr const char* kUsage =
     "usage: msgs train --data DIR --out DIR [--strategy NAME] [--scale F] [--sh-degree D]\n"
     "                  [--bands D,MS_G,...] [--seed S] [--orient none|center] [--resume] [--checkpoint-every N]\n"
+    "                  [--sheets N]\n"
     "\n"
     "Train Gaussian splats on a multi-spectral dataset (nerfstudio-style layout) with one of the\n"
     "paper's strategies, evaluate every band on the eval split and write to DIR:\n"
     "  model_<key>.ply   one per model (joint, or one per band for separate/split)\n"
     "  result.json       configuration, per-band metrics, Gaussian counts, time per stage\n"
     "  metrics.md        the per-band table in the paper's layout\n"
+    "  sheets/sheet_<n>.png  contact sheets of the first N eval captures (see --sheets), after a\n"
+    "                    finished run: a row per band of ground truth | render | error, then CIR,\n"
+    "                    NDVI and NDRE of ground truth | render | difference (as `msgs eval`)\n"
     "\n"
     "  --strategy NAME   separate | split | split+extadc | joint[+sig][+specdelay][+extadc|+msad]\n"
     "                    or joint-optimized (= joint+specdelay+msad, the default)\n"
@@ -39,8 +47,10 @@ constexpr const char* kUsage =
     "                    recorded as `transform` in result.json) or none (keep the dataset's coordinates;\n"
     "                    --no-orient is the same)\n"
     "  --checkpoint-every N  also checkpoint every N steps (always at the end and on Ctrl-C)\n"
+    "  --sheets N        contact sheets of the first N eval captures in the dataset's frame order\n"
+    "                    (default 3; 0 = none); written after result.json, which they do not change\n"
     "  --resume          continue from DIR/checkpoints/*.ckpt; the result equals an uninterrupted run\n"
-    "Ctrl-C stops after the current step, writes a checkpoint, the models and the metrics;\n"
+    "Ctrl-C stops after the current step, writes a checkpoint, the models and the metrics (no sheets);\n"
     "run the same command with --resume to continue.\n";
 
 std::atomic<bool> g_stop{false};
@@ -50,7 +60,8 @@ using msgs::cli::split_list;
 
 int run_train(const std::vector<std::string>& argv) {
   const msgs::cli::Args args(argv,
-                             {"data", "out", "strategy", "scale", "sh-degree", "bands", "seed", "checkpoint-every", "orient", "densify"},
+                             {"data", "out", "strategy", "scale", "sh-degree", "bands", "seed", "checkpoint-every", "orient", "densify",
+                              "sheets"},
                              {"help", "no-orient", "quiet", "resume"});
   if (args.flag("help")) { std::fputs(kUsage, stdout); return 0; }
   if (!args.positional().empty()) throw msgs::cli::UsageError("unexpected argument '" + args.positional()[0] + "'");
@@ -73,6 +84,9 @@ int run_train(const std::vector<std::string>& argv) {
   const long every = args.integer("checkpoint-every", 0);
   if (every < 0) throw msgs::cli::UsageError("--checkpoint-every must be >= 0");
   cfg.train.checkpoint_every = int(every);
+  const long sheets = args.integer("sheets", msgs::cli::default_run_sheets);
+  if (sheets < 0) throw msgs::cli::UsageError("--sheets must be >= 0 (0 = no contact sheets)");
+  const int max_sheets = int(std::min<long>(sheets, std::numeric_limits<int>::max()));
   try {
     (void)msgs::parse_strategy(cfg.strategy, msgs::ScheduleScale{cfg.scale});
   } catch (const std::invalid_argument& e) {
@@ -117,6 +131,15 @@ int run_train(const std::vector<std::string>& argv) {
   if (res.interrupted)
     std::printf("interrupted: models and metrics reflect the state at the stop; continue with --resume\n");
   std::printf("wrote %s\n", (out / "result.json").string().c_str());
+  std::fflush(stdout);
+
+  // After result.json: the sheets are extra, a failure here must not lose the run's record.
+  try {
+    const msgs::cli::RunSheets sh = msgs::cli::write_run_sheets(ds, res, out, max_sheets, msgs::cli::make_any_renderer);
+    if (!sh.files.empty()) std::printf("wrote %zu contact sheet(s) to %s\n", sh.files.size(), (out / "sheets").string().c_str());
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "msgs train: warning: contact sheets not written: %s\n", e.what());
+  }
   return res.interrupted ? 130 : 0;
 }
 
