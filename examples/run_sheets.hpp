@@ -4,7 +4,6 @@
 #pragma once
 
 #include <cstdio>
-#include <exception>
 #include <filesystem>
 #include <random>
 #include <stdexcept>
