@@ -11,7 +11,7 @@
 #include <cstdint>
 
 #include "bin.hpp"
-#include "detail/math.hpp"
+#include "detail/row_simd.hpp"
 
 namespace msgs {
 
@@ -36,17 +36,34 @@ struct BlendConstants {
   static constexpr S kMinTransmittance = S(1e-4);
 };
 
-/// Mahalanobis half-distance of pixel offset (dx, dy). One definition for forward and backward.
-template <class S>
-inline S splat_sigma(S a, S b, S c, S dx, S dy) {
-  return S(0.5) * (a * dx * dx + c * dy * dy) + b * dx * dy;
-}
+namespace detail {
 
-/// Unclamped fragment opacity o * exp(-sigma).
+/// The terms of a splat's Mahalanobis half-distance sigma = 0.5 (a dx^2 + c dy^2) + b dx dy along
+/// the rows of one tile. The pixel columns fix dx (a row vector) for the whole tile and dy is one
+/// number per row, so after this set-up sigma costs two vector operations per row. Forward and
+/// backward both evaluate sigma through sigma_into, so their fragment decisions agree bit for bit.
 template <class S>
-inline S splat_falloff(S o, S sigma) {
-  return o * detail::exp_neg(sigma);
-}
+struct SplatRowTerms {
+  using V = typename RowVec<S>::V;
+  static constexpr int NH = RowVec<S>::kChunks;
+  V dx[NH];          ///< pixel centre x - mean x, per column
+  V half_a_dx2[NH];  ///< 0.5 a dx^2
+  V b_dx[NH];        ///< b dx
+  S half_c;          ///< 0.5 c
+
+  SplatRowTerms(const Splat<S>& s, const V* px) {
+    for (int h = 0; h < NH; ++h) {
+      dx[h] = px[h] - s.mx;
+      half_a_dx2[h] = (S(0.5) * s.a) * dx[h] * dx[h];
+      b_dx[h] = s.b * dx[h];
+    }
+    half_c = S(0.5) * s.c;
+  }
+  /// out = sigma at chunk h of the row whose pixel centres are dy below the mean.
+  void sigma_into(V& out, S dy, int h) const { out = (half_a_dx2[h] + half_c * dy * dy) + b_dx[h] * dy; }
+};
+
+}  // namespace detail
 
 /// Read-only inputs of the blend stage for one frame.
 template <class S>
@@ -102,24 +119,44 @@ struct TileBounds {
 }  // namespace detail
 
 /// Blend one tile front to back. `C` is the channel count when known at compile time (0 = use
-/// in.count, at most MaxC). Returns the number of blended fragments.
+/// in.count, at most MaxC). Returns the number of blended fragments. Pixel state lives in row
+/// vectors (detail::RowVec: kChunks vectors per tile row); a splat visits only the rows its pixel
+/// rectangle touches.
 template <class S, int C, int MaxC, bool Depth>
 inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const BlendOutputs<S>& out) {
-  constexpr int TS = TileGrid::kTileSize, TP = TileGrid::kTilePixels;
+  constexpr int TS = TileGrid::kTileSize;
+  static_assert(TS == detail::kRowLanes, "a row vector is one tile row");
   constexpr int NC = C > 0 ? C : MaxC;
   using K = BlendConstants<S>;
+  using RV = detail::RowVec<S>;
+  using V = typename RV::V;
+  using M = typename RV::M;
+  using U = typename RV::U;
+  using I = typename RV::I;
+  constexpr int NH = RV::kChunks, L = RV::kLanes, Q = TS * NH;  // vectors per row, lanes each, per tile
   const int nc = C > 0 ? C : in.count;
   const detail::TileBounds<S> tb(*in.grid, tile);
-  alignas(64) S T[TP], active[TP], acc[NC][TP], dacc[Depth ? TP : 1];
-  alignas(64) std::uint32_t last[TP];
-  for (int p = 0; p < TP; ++p) {
-    T[p] = S(1);
-    active[p] = ((p % TS) < tb.w && (p / TS) < tb.h) ? S(1) : S(0);
-    last[p] = 0;
-    for (int ch = 0; ch < NC; ++ch) acc[ch][p] = S(0);
-    if constexpr (Depth) dacc[p] = S(0);
+  // Pixel (x, y) is lane x % L of vector y * NH + x / L.
+  V T[Q], live[Q], acc[NC][Q], dacc[Depth ? Q : 1];
+  U last[Q];
+  I blended[Q];
+  V zero, one, px[NH], max_alpha, min_alpha, min_T;
+  detail::broadcast(zero, S(0));
+  detail::broadcast(one, S(1));
+  detail::broadcast(max_alpha, K::kMaxAlpha);
+  detail::broadcast(min_alpha, K::kMinAlpha);
+  detail::broadcast(min_T, K::kMinTransmittance);
+  for (int h = 0; h < NH; ++h)
+    for (int i = 0; i < L; ++i) px[h][i] = S(tb.x0 + h * L + i) + S(0.5);  // pixel centres
+  for (int q = 0; q < Q; ++q) {
+    const int r = q / NH, h = q % NH;
+    T[q] = one;
+    for (int i = 0; i < L; ++i) live[q][i] = (h * L + i < tb.w && r < tb.h) ? S(1) : S(0);
+    detail::broadcast(last[q], 0u);
+    detail::broadcast(blended[q], 0);
+    for (int ch = 0; ch < NC; ++ch) acc[ch][q] = zero;
+    if constexpr (Depth) dacc[q] = zero;
   }
-  alignas(64) std::uint32_t blended[TP] = {};
   // Rows whose pixels have all stopped are skipped; the check runs every kCheckEvery splats so
   // that the hot loop carries no horizontal reductions.
   constexpr int kCheckEvery = 8;
@@ -132,10 +169,11 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
     if ((j - begin) % kCheckEvery == 0 && j != begin) {
       bool any = false;
       for (int r = 0; r < tb.h; ++r) {
-        if (!row_live[r]) continue;
-        S live = S(0);
-        for (int x = 0; x < TS; ++x) live = std::max(live, active[r * TS + x]);
-        row_live[r] = live > S(0);
+        if (row_live[r]) {
+          M m = live[r * NH] > zero;
+          for (int h = 1; h < NH; ++h) m |= live[r * NH + h] > zero;
+          row_live[r] = detail::any_lane(m);
+        }
         any = any || row_live[r];
       }
       if (!any) break;
@@ -150,51 +188,55 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
     const int r0 = std::max(s.rect.y0 - tb.y0, 0), r1 = std::min(s.rect.y1 - tb.y0, tb.h - 1);
     S col[NC];
     for (int ch = 0; ch < NC; ++ch) col[ch] = ch < nc ? in.colours[std::size_t(g) * std::size_t(nc) + std::size_t(ch)] : S(0);
-    const std::uint32_t pos = std::uint32_t(j - begin + 1);
+    U pos;
+    detail::broadcast(pos, std::uint32_t(j - begin + 1));
+    const detail::SplatRowTerms<S> terms(s, px);
     std::uint32_t rows_blended = 0;
     for (int r = r0; r <= r1; ++r) {
       if (!row_live[r]) continue;
       const S dy = S(tb.y0 + r) + S(0.5) - s.my;
-      S* Tr = T + r * TS;
-      S* ar = active + r * TS;
-      std::uint32_t* lr = last + r * TS;
-      std::uint32_t* br = blended + r * TS;
-      int row_took = 0;
-#pragma omp simd reduction(| : row_took)
-      for (int x = 0; x < TS; ++x) {
-        const S dx = S(tb.x0 + x) + S(0.5) - s.mx;
-        const S sigma = splat_sigma(s.a, s.b, s.c, dx, dy);
-        const S alpha = std::min(K::kMaxAlpha, splat_falloff(s.o, sigma));
-        const bool ok = ar[x] > S(0) && sigma >= S(0) && alpha >= K::kMinAlpha;
-        const S next_T = Tr[x] * (S(1) - alpha);
-        const bool stop = ok && next_T <= K::kMinTransmittance;
-        const bool take = ok && !stop;
-        const S weight = take ? alpha * Tr[x] : S(0);
-        for (int ch = 0; ch < NC; ++ch) acc[ch][r * TS + x] += weight * col[ch];
-        if constexpr (Depth) dacc[r * TS + x] += weight * s.z;
-        Tr[x] = take ? next_T : Tr[x];
-        ar[x] = stop ? S(0) : ar[x];
-        lr[x] = take ? pos : lr[x];
-        br[x] += take ? 1u : 0u;
-        row_took |= take ? 1 : 0;
+      I took;
+      detail::broadcast(took, 0);
+      for (int h = 0; h < NH; ++h) {
+        const int q = r * NH + h;
+        V sigma, e;
+        terms.sigma_into(sigma, dy, h);
+        detail::exp_neg_into(e, sigma);
+        const V falloff = s.o * e;
+        const V alpha = falloff < max_alpha ? falloff : max_alpha;
+        const V t = T[q];
+        const M ok = (live[q] > zero) & (sigma >= zero) & (alpha >= min_alpha);
+        const V next_T = t * (one - alpha);
+        const M stop = ok & (next_T <= min_T);
+        const M take = ok & ~stop;
+        const V weight = take ? alpha * t : zero;
+        for (int ch = 0; ch < NC; ++ch) acc[ch][q] += weight * col[ch];
+        if constexpr (Depth) dacc[q] += weight * s.z;
+        T[q] = take ? next_T : t;
+        live[q] = stop ? zero : live[q];
+        const I take32 = __builtin_convertvector(take, I);
+        last[q] = take32 ? pos : last[q];
+        blended[q] -= take32;  // a true lane is -1
+        took |= take32;
       }
-      rows_blended |= std::uint32_t(row_took) << r;
+      rows_blended |= std::uint32_t(detail::any_lane(took)) << r;
     }
     out.row_mask[j] = std::uint16_t(rows_blended);
   }
   for (; j < end; ++j) out.row_mask[j] = 0;  // entries after every pixel stopped
   std::uint64_t fragments = 0;
-  for (int p = 0; p < TP; ++p) fragments += blended[p];
+  for (int q = 0; q < Q; ++q)
+    for (int i = 0; i < L; ++i) fragments += std::uint64_t(blended[q][i]);
   const int W = in.grid->width;
   for (int y = 0; y < tb.h; ++y)
     for (int x = 0; x < tb.w; ++x) {
-      const int p = y * TS + x;
+      const int q = y * NH + x / L, i = x % L;
       const std::size_t pix = std::size_t(tb.y0 + y) * std::size_t(W) + std::size_t(tb.x0 + x);
-      for (int ch = 0; ch < nc; ++ch) out.image[pix * std::size_t(nc) + std::size_t(ch)] = acc[ch][p] + T[p] * in.background[ch];
-      out.alpha[pix] = S(1) - T[p];
-      if constexpr (Depth) out.depth[pix] = dacc[p];
-      out.transmittance[pix] = T[p];
-      out.last[pix] = last[p];
+      for (int ch = 0; ch < nc; ++ch) out.image[pix * std::size_t(nc) + std::size_t(ch)] = acc[ch][q][i] + T[q][i] * in.background[ch];
+      out.alpha[pix] = S(1) - T[q][i];
+      if constexpr (Depth) out.depth[pix] = dacc[q][i];
+      out.transmittance[pix] = T[q][i];
+      out.last[pix] = last[q][i];
     }
   return fragments;
 }
@@ -202,52 +244,72 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
 /// Backward of blend_tile_fwd for one tile: walks the tile's list back to front, rebuilding each
 /// pixel's transmittance by division (alpha <= 0.99 keeps it well conditioned), and writes one
 /// gradient record per intersection into `records` ([M, BlendRecord::size(count)]). Adds the
-/// tile's background gradient into `d_background` ([count]).
+/// tile's background gradient into `d_background` ([count]). Alpha is evaluated by the same
+/// expressions as in the forward, so both make the same fragment decisions.
 template <class S, int C, int MaxC, bool Depth>
 inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmittance, const std::uint32_t* last_in,
                            const std::uint16_t* row_mask, const BlendGradInputs<S>& gin, S* records, S* d_background) {
-  constexpr int TS = TileGrid::kTileSize, TP = TileGrid::kTilePixels;
+  constexpr int TS = TileGrid::kTileSize;
+  static_assert(TS == detail::kRowLanes, "a row vector is one tile row");
   constexpr int NC = C > 0 ? C : MaxC;
   using K = BlendConstants<S>;
+  using RV = detail::RowVec<S>;
+  using V = typename RV::V;
+  using M = typename RV::M;
+  using U = typename RV::U;
+  constexpr int NH = RV::kChunks, L = RV::kLanes, Q = TS * NH;
   const int nc = C > 0 ? C : in.count;
   const int R = BlendRecord::size(nc);
   const detail::TileBounds<S> tb(*in.grid, tile);
   const std::uint64_t begin = in.bins->tile_offset[std::size_t(tile)], end = in.bins->tile_offset[std::size_t(tile) + 1];
 
-  alignas(64) S T[TP], t_final_terms[TP], dimg[NC][TP], buf[NC][TP], dD[Depth ? TP : 1], bufd[Depth ? TP : 1];
-  alignas(64) std::uint32_t last[TP];
+  // Per pixel: T (rebuilt back to front), the final-transmittance terms, dL/dimage and
+  // B = sum over the splats behind of w_j (colour_j . dL/dimage [+ z_j dL/ddepth]), which is what
+  // the colour of those splats contributes to dL/dalpha of this one.
+  V T[Q], t_final_terms[Q], dimg[NC][Q], B[Q], dD[Depth ? Q : 1];
+  U last[Q];
+  V zero, one, px[NH], max_alpha, min_alpha;
+  detail::broadcast(zero, S(0));
+  detail::broadcast(one, S(1));
+  detail::broadcast(max_alpha, K::kMaxAlpha);
+  detail::broadcast(min_alpha, K::kMinAlpha);
+  for (int h = 0; h < NH; ++h)
+    for (int i = 0; i < L; ++i) px[h][i] = S(tb.x0 + h * L + i) + S(0.5);
   std::uint32_t max_last = 0;
   S bg_grad[NC] = {};
   const int W = in.grid->width;
-  for (int p = 0; p < TP; ++p) {
-    const int x = p % TS, y = p / TS;
-    const bool valid = x < tb.w && y < tb.h;
-    const std::size_t pix = valid ? std::size_t(tb.y0 + y) * std::size_t(W) + std::size_t(tb.x0 + x) : 0;
-    T[p] = valid ? transmittance[pix] : S(1);
-    last[p] = valid ? last_in[pix] : 0;
-    max_last = std::max(max_last, last[p]);
-    S bg_dot = S(0);
-    for (int ch = 0; ch < NC; ++ch) {
-      const S d = (valid && ch < nc) ? gin.d_image[pix * std::size_t(nc) + std::size_t(ch)] : S(0);
-      dimg[ch][p] = d;
-      buf[ch][p] = S(0);
-      if (ch < nc) {
-        bg_dot += in.background[ch] * d;
-        bg_grad[ch] += T[p] * d;
+  for (int y = 0; y < TS; ++y)
+    for (int x = 0; x < TS; ++x) {
+      const int q = y * NH + x / L, i = x % L;
+      const bool valid = x < tb.w && y < tb.h;
+      const std::size_t pix = valid ? std::size_t(tb.y0 + y) * std::size_t(W) + std::size_t(tb.x0 + x) : 0;
+      const S t = valid ? transmittance[pix] : S(1);
+      T[q][i] = t;
+      B[q][i] = S(0);
+      last[q][i] = valid ? last_in[pix] : 0;
+      max_last = std::max(max_last, last[q][i]);
+      S bg_dot = S(0);
+      for (int ch = 0; ch < NC; ++ch) {
+        const S d = (valid && ch < nc) ? gin.d_image[pix * std::size_t(nc) + std::size_t(ch)] : S(0);
+        dimg[ch][q][i] = d;
+        if (ch < nc) {
+          bg_dot += in.background[ch] * d;
+          bg_grad[ch] += t * d;
+        }
       }
+      const S da = (valid && gin.d_alpha) ? gin.d_alpha[pix] : S(0);
+      // d(1 - T_final)/d alpha_i and d(T_final bg)/d alpha_i both scale with T_final / (1 - alpha_i).
+      t_final_terms[q][i] = valid ? t * (da - bg_dot) : S(0);
+      if constexpr (Depth) dD[q][i] = (valid && gin.d_depth) ? gin.d_depth[pix] : S(0);
     }
-    const S da = (valid && gin.d_alpha) ? gin.d_alpha[pix] : S(0);
-    // d(1 - T_final)/d alpha_i and d(T_final bg)/d alpha_i both scale with T_final / (1 - alpha_i).
-    t_final_terms[p] = valid ? T[p] * (da - bg_dot) : S(0);
-    if constexpr (Depth) {
-      dD[p] = (valid && gin.d_depth) ? gin.d_depth[pix] : S(0);
-      bufd[p] = S(0);
-    }
-  }
   for (int ch = 0; ch < nc; ++ch) d_background[ch] += bg_grad[ch];
   if (begin == end) return;  // an empty tile still passes its background gradient (T = 1)
 
-  constexpr int NL = BlendRecord::kBase + NC;  // lane accumulators per record entry
+  // Lane accumulators, summed over the splat's pixels: with v = dL/dsigma per pixel,
+  // P = sum v dx, Q = sum v dy, AA = sum v dx^2, BB = sum v dx dy, CC = sum v dy^2 give the conic and
+  // mean gradients after the horizontal sum; the others map to record slots directly.
+  enum : int { kP = 0, kQ, kAA, kBB, kCC, kOp, kAbsX, kAbsY, kDep, kCol };
+  constexpr int NL = kCol + NC;
   const std::uint32_t* list = in.bins->tile_list.data();
   for (std::uint64_t jr = begin + max_last; jr-- > begin;) {
     if (jr >= begin + kPrefetchDistance) {
@@ -257,62 +319,68 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
     }
     const std::uint32_t g = list[jr];
     const Splat<S> s = in.splats[g];
-    const std::uint32_t k = std::uint32_t(jr - begin);  // pixel blends this splat iff k < last[p]
+    U k;  // a pixel blended this splat iff k < last
+    detail::broadcast(k, std::uint32_t(jr - begin));
     S col[NC];
     for (int ch = 0; ch < NC; ++ch) col[ch] = ch < nc ? in.colours[std::size_t(g) * std::size_t(nc) + std::size_t(ch)] : S(0);
-    alignas(64) S lane[NL][TS];
-    for (int l = 0; l < NL; ++l)
-      for (int x = 0; x < TS; ++x) lane[l][x] = S(0);
+    V lane[NL * NH];  // [accumulator][chunk]
+    for (int l = 0; l < NL * NH; ++l) lane[l] = zero;
+    const detail::SplatRowTerms<S> terms(s, px);
+    V a_dx[NH];
+    for (int h = 0; h < NH; ++h) a_dx[h] = s.a * terms.dx[h];
     // Only the rows where the forward blended this splat (its row mask) can carry gradient.
     for (std::uint32_t rows = row_mask[jr]; rows != 0; rows &= rows - 1) {
       const int r = std::countr_zero(rows);
       const S dy = S(tb.y0 + r) + S(0.5) - s.my;
-#pragma omp simd
-      for (int x = 0; x < TS; ++x) {
-        const int p = r * TS + x;
-        const S dx = S(tb.x0 + x) + S(0.5) - s.mx;
-        const S sigma = splat_sigma(s.a, s.b, s.c, dx, dy);
-        const S e = detail::exp_neg(sigma);
-        const S falloff = s.o * e;  // == splat_falloff(s.o, sigma), bit for bit
-        const S alpha = std::min(K::kMaxAlpha, falloff);
-        const bool ok = k < last[p] && sigma >= S(0) && alpha >= K::kMinAlpha;
-        const S ra = S(1) / (S(1) - alpha);
-        const S Ti = ok ? T[p] * ra : T[p];
-        const S fac = alpha * Ti;
-        S v_alpha = t_final_terms[p] * ra;
-        for (int ch = 0; ch < NC; ++ch) v_alpha += (col[ch] * Ti - buf[ch][p] * ra) * dimg[ch][p];
-        if constexpr (Depth) v_alpha += (s.z * Ti - bufd[p] * ra) * dD[p];
-        v_alpha = ok ? v_alpha : S(0);
-        for (int ch = 0; ch < NC; ++ch) {
-          lane[BlendRecord::kBase + ch][x] += ok ? fac * dimg[ch][p] : S(0);
-          buf[ch][p] += ok ? col[ch] * fac : S(0);
-        }
-        if constexpr (Depth) {
-          lane[BlendRecord::kDepth][x] += ok ? fac * dD[p] : S(0);
-          bufd[p] += ok ? s.z * fac : S(0);
-        }
+      for (int h = 0; h < NH; ++h) {
+        const int q = r * NH + h;
+        V sigma, e;
+        terms.sigma_into(sigma, dy, h);
+        detail::exp_neg_into(e, sigma);
+        const V falloff = s.o * e;
+        const V alpha = falloff < max_alpha ? falloff : max_alpha;
+        const M ok = __builtin_convertvector(k < last[q], M) & (sigma >= zero) & (alpha >= min_alpha);
+        const V ra = one / (one - alpha);
+        const V Ti = ok ? T[q] * ra : T[q];
+        const V fac = alpha * Ti;
+        V cd = col[0] * dimg[0][q];  // colour . dL/dimage of this pixel
+        for (int ch = 1; ch < NC; ++ch) cd += col[ch] * dimg[ch][q];
+        if constexpr (Depth) cd += s.z * dD[q];
+        const V v_alpha = ok ? Ti * cd + ra * (t_final_terms[q] - B[q]) : zero;
+        B[q] += ok ? fac * cd : zero;
+        for (int ch = 0; ch < NC; ++ch) lane[(kCol + ch) * NH + h] += ok ? fac * dimg[ch][q] : zero;
+        if constexpr (Depth) lane[kDep * NH + h] += ok ? fac * dD[q] : zero;
         // alpha = min(0.99, o e^-sigma): no gradient through the clamp.
-        const bool free = falloff < K::kMaxAlpha;
-        const S v_sigma = free ? -v_alpha * falloff : S(0);
-        lane[BlendRecord::kOpacity][x] += free ? v_alpha * e : S(0);
-        lane[BlendRecord::kConicA][x] += S(0.5) * dx * dx * v_sigma;
-        lane[BlendRecord::kConicB][x] += dx * dy * v_sigma;
-        lane[BlendRecord::kConicC][x] += S(0.5) * dy * dy * v_sigma;
-        const S gx = -v_sigma * (s.a * dx + s.b * dy);
-        const S gy = -v_sigma * (s.b * dx + s.c * dy);
-        lane[BlendRecord::kMeanX][x] += gx;
-        lane[BlendRecord::kMeanY][x] += gy;
-        lane[BlendRecord::kAbsX][x] += std::abs(gx);
-        lane[BlendRecord::kAbsY][x] += std::abs(gy);
-        T[p] = Ti;
+        const M free = falloff < max_alpha;
+        const V v_sigma = free ? -v_alpha * falloff : zero;
+        lane[kOp * NH + h] += free ? v_alpha * e : zero;
+        const V v_dx = v_sigma * terms.dx[h], v_dy = v_sigma * dy;
+        lane[kP * NH + h] += v_dx;
+        lane[kQ * NH + h] += v_dy;
+        lane[kAA * NH + h] += v_dx * terms.dx[h];
+        lane[kBB * NH + h] += v_dx * dy;
+        lane[kCC * NH + h] += v_dy * dy;
+        V gx = v_sigma * (a_dx[h] + s.b * dy), gy = v_sigma * (terms.b_dx[h] + s.c * dy);  // -dL/dmean per pixel
+        detail::abs_into(gx, gx);
+        detail::abs_into(gy, gy);
+        lane[kAbsX * NH + h] += gx;
+        lane[kAbsY * NH + h] += gy;
+        T[q] = Ti;
       }
     }
+    S sum[NL];
+    detail::sum_rows(lane, NL, sum);
     S* rec = records + jr * std::uint64_t(R);
-    for (int l = 0; l < BlendRecord::kBase + nc; ++l) {
-      S sum = S(0);
-      for (int x = 0; x < TS; ++x) sum += lane[l][x];
-      rec[l] = sum;
-    }
+    rec[BlendRecord::kMeanX] = -(s.a * sum[kP] + s.b * sum[kQ]);
+    rec[BlendRecord::kMeanY] = -(s.b * sum[kP] + s.c * sum[kQ]);
+    rec[BlendRecord::kConicA] = S(0.5) * sum[kAA];
+    rec[BlendRecord::kConicB] = sum[kBB];
+    rec[BlendRecord::kConicC] = S(0.5) * sum[kCC];
+    rec[BlendRecord::kOpacity] = sum[kOp];
+    rec[BlendRecord::kAbsX] = sum[kAbsX];
+    rec[BlendRecord::kAbsY] = sum[kAbsY];
+    rec[BlendRecord::kDepth] = Depth ? sum[kDep] : S(0);
+    for (int ch = 0; ch < nc; ++ch) rec[BlendRecord::kBase + ch] = sum[kCol + ch];
   }
   // Splats behind every pixel's last blended one received no gradient.
   for (std::uint64_t j = begin + max_last; j < end; ++j)

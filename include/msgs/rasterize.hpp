@@ -58,6 +58,8 @@ class Rasterizer {
  public:
   using Model = GaussianModel<G, S>;
   static constexpr int kBands = G::bands;
+  /// How many Gaussians ahead the gradient reduction prefetches their intersection records.
+  static constexpr std::int64_t kRecordPrefetch = 8;
 
   /// Render `model` from `cam`. Returns the image [H, W, band_count].
   const Image<S>& forward(const Model& model, const Camera<S>& cam, const RenderSettings<S>& settings = {}) {
@@ -118,14 +120,28 @@ class Rasterizer {
 
     const auto t1 = clock::now();
     // Per-Gaussian reduction in a fixed (tile) order, then projection and colour backward.
+    // Gaussians are visited in index order (the model and gradient arrays are then read and
+    // written sequentially); rank_[g] is g's position in the depth order that owns its pairs.
     const std::int64_t V = std::int64_t(bins_.order.size());
+    rank_.resize(N);
+    for (std::int64_t s = 0; s < V; ++s) rank_[bins_.order[std::size_t(s)]] = std::uint32_t(s);
     const ProjectCamera& pcam = pcam_;
     const int first = first_, count = count_, deg = sh_degree_;
 #pragma omp parallel for schedule(dynamic, 256)
-    for (std::int64_t s = 0; s < V; ++s) {
-      const std::uint32_t g = bins_.order[std::size_t(s)];
+    for (std::int64_t v = 0; v < V; ++v) {
+      // Records are scattered over the tile lists: fetch those of a later Gaussian ahead of use.
+      if (v + kRecordPrefetch < V) {
+        const std::size_t sp = rank_[visible_[std::size_t(v + kRecordPrefetch)]];
+        for (std::uint64_t m = bins_.pair_offset[sp]; m < bins_.pair_offset[sp + 1]; ++m) {
+          const S* rec = records_.data() + bins_.pair_slot[m] * std::uint64_t(R);
+          __builtin_prefetch(rec);
+          __builtin_prefetch(rec + R - 1);  // a record may straddle two cache lines
+        }
+      }
+      const std::uint32_t g = visible_[std::size_t(v)];
+      const std::size_t s = rank_[g];
       double acc[BlendRecord::kBase + kBands] = {};
-      for (std::uint64_t m = bins_.pair_offset[std::size_t(s)]; m < bins_.pair_offset[std::size_t(s) + 1]; ++m) {
+      for (std::uint64_t m = bins_.pair_offset[s]; m < bins_.pair_offset[s + 1]; ++m) {
         const S* rec = records_.data() + bins_.pair_slot[m] * std::uint64_t(R);
         for (int l = 0; l < R; ++l) acc[l] += double(rec[l]);
       }
@@ -363,7 +379,8 @@ class Rasterizer {
   std::vector<PixelRect> rects_;       // [N]
   std::vector<std::int32_t> radii_;    // [N, 2]
   std::vector<std::uint8_t> visible_flag_;  // [N]
-  std::vector<std::uint32_t> visible_; // [V]
+  std::vector<std::uint32_t> visible_; // [V] ascending
+  std::vector<std::uint32_t> rank_;    // [N] position of a visible Gaussian in bins_.order
   Binning bins_;
 
   // Blend results.

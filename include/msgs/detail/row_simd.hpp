@@ -1,0 +1,190 @@
+// include/msgs/detail/row_simd.hpp
+// A tile row (16 pixels) as one or more vectors of the GCC/Clang vector extension, sized to the
+// target's widest registers (one 16-lane vector with AVX-512, two 8-lane with AVX/AVX2, four
+// 4-lane with SSE or NEON), for the blend loops: element-wise IEEE arithmetic and selects, with no
+// reliance on the auto-vectoriser's if-conversion (which, under plain AVX2 or SSE, gives up on the
+// blend loop and runs it scalar, and under AVX-512 emits masked stores that the next load of the
+// same row cannot forward from).
+//
+// Helpers write their result through a reference instead of returning a vector: returning a
+// vector wider than the target's registers changes the calling convention and GCC warns (-Wpsabi).
+#pragma once
+
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <type_traits>
+
+#if defined(__SSE2__)
+#include <immintrin.h>
+#endif
+
+namespace msgs::detail {
+
+/// Pixels in a tile row.
+inline constexpr int kRowLanes = 16;
+
+/// Bytes of the widest vector registers of the target: 64 (AVX-512), 32 (AVX), else 16.
+#if defined(__AVX512F__)
+inline constexpr int kVectorBytes = 64;
+#elif defined(__AVX__)
+inline constexpr int kVectorBytes = 32;
+#else
+inline constexpr int kVectorBytes = 16;
+#endif
+
+/// Vector types of a tile row in scalar S, kChunks vectors of kLanes lanes each: V (values),
+/// M (comparison masks: all ones = true, the signed integer type of S's width), U and I (32-bit
+/// unsigned / signed per lane: list positions, counts).
+template <class S>
+struct RowVec {
+  static constexpr int kLanes = kVectorBytes / int(sizeof(S)) < kRowLanes ? kVectorBytes / int(sizeof(S)) : kRowLanes;
+  static constexpr int kChunks = kRowLanes / kLanes;
+  static_assert(kChunks * kLanes == kRowLanes);
+  using MaskScalar = std::conditional_t<sizeof(S) == 4, std::int32_t, std::int64_t>;
+  typedef S V __attribute__((vector_size(kLanes * sizeof(S))));
+  typedef MaskScalar M __attribute__((vector_size(kLanes * sizeof(S))));
+  typedef std::uint32_t U __attribute__((vector_size(kLanes * sizeof(std::uint32_t))));
+  typedef std::int32_t I __attribute__((vector_size(kLanes * sizeof(std::int32_t))));
+};
+
+/// Every lane of `v` set to `x` (exact, also for -0).
+template <class V, class S>
+inline void broadcast(V& v, S x) {
+  for (int i = 0; i < int(sizeof(V) / sizeof(S)); ++i) v[i] = x;
+}
+
+/// Is any lane of mask `m` set? (One test instruction on x86; a loop elsewhere.)
+template <class M>
+inline bool any_lane(const M& m) {
+#if defined(__AVX512F__)
+  if constexpr (sizeof(M) == 64) {
+    const __m512i v = std::bit_cast<__m512i>(m);
+    return _mm512_test_epi32_mask(v, v) != 0;
+  }
+#endif
+#if defined(__AVX__)
+  if constexpr (sizeof(M) == 32) {
+    const __m256i v = std::bit_cast<__m256i>(m);
+    return !_mm256_testz_si256(v, v);
+  }
+#endif
+#if defined(__SSE2__)
+  if constexpr (sizeof(M) == 16) return _mm_movemask_epi8(std::bit_cast<__m128i>(m)) != 0;
+#endif
+  bool any = false;
+  for (int i = 0; i < int(sizeof(M) / sizeof(m[0])); ++i) any = any || m[i] != 0;
+  return any;
+}
+
+/// out = |v| lane by lane (clears the sign bits).
+template <class V>
+inline void abs_into(V& out, const V& v) {
+  using Lane = std::remove_cvref_t<decltype(v[0])>;
+  using Bits = std::conditional_t<sizeof(Lane) == 4, std::uint32_t, std::uint64_t>;
+  typedef Bits BV __attribute__((vector_size(sizeof(V))));
+  out = std::bit_cast<V>(std::bit_cast<BV>(v) & ~(Bits(1) << (8 * sizeof(Lane) - 1)));
+}
+
+/// The sum of the lanes of `v` reduced to 4 lanes by halving (out4[0..3]); fewer lanes are copied.
+template <class S, class Vv>
+inline void halve_to_four(const Vv& v, S* out4) {
+  constexpr int W = int(sizeof(Vv) / sizeof(S));
+  if constexpr (W <= 4) {
+    for (int i = 0; i < W; ++i) out4[i] = v[i];
+  } else {
+    typedef S H __attribute__((vector_size(sizeof(Vv) / 2)));
+    struct Halves { H lo, hi; };
+    const Halves p = std::bit_cast<Halves>(v);
+    const H h = p.lo + p.hi;
+    halve_to_four<S>(h, out4);
+  }
+}
+
+/// sum[l] = the sum of the 16 lanes of row l, stored as kChunks vectors at v[l * kChunks ...],
+/// for l < n. The summation tree is fixed (lane i plus lane i + 8, then i + 4, then
+/// (0 + 2) + (1 + 3)), the same for every vector width, so a row sums to the same bits with
+/// AVX-512, AVX or SSE.
+template <class S, class V>
+inline void sum_rows(const V* v, int n, S* sum) {
+  constexpr int NH = RowVec<S>::kChunks, L = RowVec<S>::kLanes;
+  for (int l = 0; l < n; ++l) {
+    V c[NH];
+    for (int h = 0; h < NH; ++h) c[h] = v[l * NH + h];
+    for (int w = NH / 2; w >= 1; w /= 2)
+      for (int h = 0; h < w; ++h) c[h] = c[h] + c[h + w];
+    S q[4];
+    halve_to_four<S>(c[0], q);
+    sum[l] = L >= 4 ? (q[0] + q[2]) + (q[1] + q[3]) : q[0] + q[1];
+  }
+}
+
+/// out = a * b + c lane by lane, fused (one rounding) where the target has FMA, else a multiply
+/// and an add. Every kernel that needs the same value calls this, so they agree within a build.
+template <class T>
+inline void fmadd_into(T& out, const T& a, const T& b, const T& c) {
+  if constexpr (std::is_same_v<std::remove_cvref_t<decltype(a[0])>, float>) {
+#if defined(__AVX512F__)
+    if constexpr (sizeof(T) == 64) {
+      out = std::bit_cast<T>(_mm512_fmadd_ps(std::bit_cast<__m512>(a), std::bit_cast<__m512>(b), std::bit_cast<__m512>(c)));
+      return;
+    }
+#endif
+#if defined(__FMA__)
+    if constexpr (sizeof(T) == 32) {
+      out = std::bit_cast<T>(_mm256_fmadd_ps(std::bit_cast<__m256>(a), std::bit_cast<__m256>(b), std::bit_cast<__m256>(c)));
+      return;
+    }
+    if constexpr (sizeof(T) == 16) {
+      out = std::bit_cast<T>(_mm_fmadd_ps(std::bit_cast<__m128>(a), std::bit_cast<__m128>(b), std::bit_cast<__m128>(c)));
+      return;
+    }
+#endif
+  }
+  out = a * b + c;
+}
+
+/// out = exp(-s) for s >= 0, lane by lane: the Gaussian falloff of the blend
+/// stage. For float a branch-free Cephes-style polynomial (about 1 ulp; FMA where the target has it);
+/// the input is
+/// clamped to [0, 87] so it never overflows, underflows to a subnormal or returns NaN for finite
+/// input (NaN input gives 0 or exp(-87), never NaN). For double, std::exp on the same clamped range.
+template <class T>
+inline void exp_neg_into(T& out, const T& s_in) {
+  using Lane = std::remove_cvref_t<decltype(std::declval<T>()[0])>;
+  T s = s_in;
+  T zero, hi;
+  broadcast(zero, Lane(0));
+  broadcast(hi, Lane(87));
+  s = s < zero ? zero : s;
+  s = s > hi ? hi : s;
+  s = s == s ? s : hi;  // NaN -> exp(-87)
+  if constexpr (std::is_same_v<Lane, float>) {
+    typedef std::int32_t IV __attribute__((vector_size(sizeof(T))));
+    const T x = -s;
+    T c[9];
+    const float cs[9] = {-0.693359375f, 2.12194440e-4f,  1.9875691500e-4f, 1.3981999507e-3f, 8.3334519073e-3f,
+                         4.1665795894e-2f, 1.6666665459e-1f, 5.0000001201e-1f, 1.0f};
+    for (int k = 0; k < 9; ++k) broadcast(c[k], cs[k]);
+    // n = round(x / ln 2) by the 1.5 * 2^23 trick (exact in round-to-nearest, no libm call).
+    const float shifter = 12582912.0f;
+    const T n = (x * 1.44269504088896341f + shifter) - shifter;
+    T r, p, y;
+    fmadd_into(r, n, c[0], x);  // x - n ln 2 in two parts (Cody-Waite)
+    fmadd_into(r, n, c[1], r);
+    fmadd_into(p, c[2], r, c[3]);
+    fmadd_into(p, p, r, c[4]);
+    fmadd_into(p, p, r, c[5]);
+    fmadd_into(p, p, r, c[6]);
+    fmadd_into(p, p, r, c[7]);
+    const T pr = p * r;
+    fmadd_into(y, pr, r, r);
+    y = y + c[8];
+    const IV e = (__builtin_convertvector(n, IV) + 127) << 23;
+    out = y * std::bit_cast<T>(e);
+  } else {
+    for (int i = 0; i < int(sizeof(T) / sizeof(Lane)); ++i) out[i] = std::exp(-s[i]);
+  }
+}
+
+}  // namespace msgs::detail
