@@ -54,7 +54,10 @@ inline PixelRect pixel_rect(double mx, double my, double ex, double ey, int widt
 /// 2^32 pixel-tile pairs.
 struct Binning {
   std::vector<std::uint32_t> order;        ///< [V] visible Gaussian ids, front to back
-  std::vector<std::uint64_t> pair_offset;  ///< [V + 1] pairs of order[s]: [pair_offset[s], pair_offset[s+1])
+  /// [V + 1] pairs of the v-th visible Gaussian (in the increasing id order of the visible ids
+  /// passed to bin_gaussians): [pair_offset[v], pair_offset[v+1]). Id order lets the gradient
+  /// reduction read the model sequentially.
+  std::vector<std::uint64_t> pair_offset;
   std::vector<std::uint64_t> pair_slot;    ///< [M] position of pair m in tile_list (pairs in tile order per Gaussian)
   std::vector<std::uint32_t> tile_list;    ///< [M] Gaussian ids, grouped by tile, front to back within a tile
   std::vector<std::uint64_t> tile_offset;  ///< [tiles + 1] tile t owns tile_list[tile_offset[t] .. tile_offset[t+1])
@@ -111,17 +114,23 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
 
   // 1. Front-to-back order of the visible Gaussians.
   using Key = decltype(detail::depth_key(S(0)));
+  // Sorted are positions v into visible_ids (increasing ids, so ties stay ordered by id).
   std::vector<Key> keys(V);
-  out.order = visible_ids;
-  for (std::size_t s = 0; s < V; ++s) keys[s] = detail::depth_key(depth[visible_ids[s]]);
-  detail::radix_sort_by_key(keys, out.order);
+  std::vector<std::uint32_t> pos(V);
+  for (std::size_t v = 0; v < V; ++v) {
+    keys[v] = detail::depth_key(depth[visible_ids[v]]);
+    pos[v] = std::uint32_t(v);
+  }
+  detail::radix_sort_by_key(keys, pos);
+  out.order.resize(V);
+  for (std::size_t s = 0; s < V; ++s) out.order[s] = visible_ids[pos[s]];
 
-  // 2. Pairs per Gaussian (tile-rectangle area), prefix-summed in depth order.
+  // 2. Pairs per Gaussian (tile-rectangle area), prefix-summed in id order.
   out.pair_offset.assign(V + 1, 0);
-  for (std::size_t s = 0; s < V; ++s) {
-    const PixelRect& r = rects[out.order[s]];
+  for (std::size_t v = 0; v < V; ++v) {
+    const PixelRect& r = rects[visible_ids[v]];
     const std::uint64_t nx = std::uint64_t(r.x1 / TS - r.x0 / TS + 1), ny = std::uint64_t(r.y1 / TS - r.y0 / TS + 1);
-    out.pair_offset[s + 1] = out.pair_offset[s] + nx * ny;
+    out.pair_offset[v + 1] = out.pair_offset[v] + nx * ny;
   }
   const std::uint64_t M = out.pair_offset[V];
 
@@ -158,7 +167,7 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
     for (std::size_t s = chunk_begin(k); s < chunk_begin(k + 1); ++s) {
       const std::uint32_t g = out.order[s];
       const PixelRect& r = rects[g];
-      std::uint64_t m = out.pair_offset[s];
+      std::uint64_t m = out.pair_offset[pos[s]];
       for (int ty = r.y0 / TS; ty <= r.y1 / TS; ++ty)
         for (int tx = r.x0 / TS; tx <= r.x1 / TS; ++tx) {
           const std::uint64_t slot = cursor[std::size_t(ty) * std::size_t(grid.tiles_x) + std::size_t(tx)]++;

@@ -136,6 +136,32 @@ inline bool project_fwd(const GaussianGeometry& g, const ProjectCamera& cam, Pro
   c.sig = detail::sigmoid(g.opacity_logit);
   if (!(c.sig >= PC::kMinAlpha)) return false;
 
+  // Tan-fov clamp limits (generalised for off-centre principal points).
+  const double tan_fovx = 0.5 * cam.width / cam.fx, tan_fovy = 0.5 * cam.height / cam.fy;
+  c.lim_x_pos = (cam.width - cam.cx) / cam.fx + PC::kFovClampMargin * tan_fovx;
+  c.lim_x_neg = cam.cx / cam.fx + PC::kFovClampMargin * tan_fovx;
+  c.lim_y_pos = (cam.height - cam.cy) / cam.fy + PC::kFovClampMargin * tan_fovy;
+  c.lim_y_neg = cam.cy / cam.fy + PC::kFovClampMargin * tan_fovy;
+  c.txz = c.tcam.x() / tz;
+  c.tyz = c.tcam.y() / tz;
+  const double txc = std::min(c.lim_x_pos, std::max(-c.lim_x_neg, c.txz));
+  const double tyc = std::min(c.lim_y_pos, std::max(-c.lim_y_neg, c.tyz));
+  const double mean_x = cam.fx * c.txz + cam.cx, mean_y = cam.fy * c.tyz + cam.cy;
+
+  // Far off-screen? Most Gaussians of a large scene are outside any one view, so bound the screen
+  // extent before building the covariance: cov2d(0,0) = j0^T cov_cam j0 <= s_max^2 |j0|^2 with
+  // |j0|^2 = (fx/tz)^2 (1 + txc^2), and the antialiasing compensation only lowers the opacity.
+  // A Gaussian culled here is one the exact test below would cull too.
+  {
+    const double smax = std::exp(std::clamp(g.log_scale.maxCoeff(), -PC::kLogScaleClamp, PC::kLogScaleClamp));
+    const double kb = std::sqrt(std::max(0.0, 2.0 * std::log(c.sig / PC::kMinAlpha)));
+    const double sx = smax * cam.fx / tz, sy = smax * cam.fy / tz;
+    const double bx = kb * std::sqrt(sx * sx * (1.0 + txc * txc) + PC::kDilation) * (1.0 + 1e-6) + 1e-6;
+    const double by = kb * std::sqrt(sy * sy * (1.0 + tyc * tyc) + PC::kDilation) * (1.0 + 1e-6) + 1e-6;
+    if (mean_x + bx < -1.0 || mean_x - bx > cam.width + 1.0 || mean_y + by < -1.0 || mean_y - by > cam.height + 1.0)
+      return false;
+  }
+
   for (int i = 0; i < 3; ++i) {
     const double ls = g.log_scale[i];
     const double cl = std::clamp(ls, -PC::kLogScaleClamp, PC::kLogScaleClamp);
@@ -147,16 +173,9 @@ inline bool project_fwd(const GaussianGeometry& g, const ProjectCamera& cam, Pro
   const Eigen::Matrix3d sigma = c.M * c.M.transpose();
   c.cov_cam = cam.R * sigma * cam.R.transpose();
 
-  // EWA Jacobian with the generalised tan-fov clamp (supports off-centre principal points).
-  const double tan_fovx = 0.5 * cam.width / cam.fx, tan_fovy = 0.5 * cam.height / cam.fy;
-  c.lim_x_pos = (cam.width - cam.cx) / cam.fx + PC::kFovClampMargin * tan_fovx;
-  c.lim_x_neg = cam.cx / cam.fx + PC::kFovClampMargin * tan_fovx;
-  c.lim_y_pos = (cam.height - cam.cy) / cam.fy + PC::kFovClampMargin * tan_fovy;
-  c.lim_y_neg = cam.cy / cam.fy + PC::kFovClampMargin * tan_fovy;
-  c.txz = c.tcam.x() / tz;
-  c.tyz = c.tcam.y() / tz;
-  const double tx = tz * std::min(c.lim_x_pos, std::max(-c.lim_x_neg, c.txz));
-  const double ty = tz * std::min(c.lim_y_pos, std::max(-c.lim_y_neg, c.tyz));
+  // EWA Jacobian with the generalised tan-fov clamp.
+  const double tx = tz * txc;
+  const double ty = tz * tyc;
   c.J << cam.fx / tz, 0, -cam.fx * tx / (tz * tz),
          0, cam.fy / tz, -cam.fy * ty / (tz * tz);
   c.cov2d = c.J * c.cov_cam * c.J.transpose();
@@ -178,8 +197,8 @@ inline bool project_fwd(const GaussianGeometry& g, const ProjectCamera& cam, Pro
   const double opacity = c.sig * c.compensation;
   if (!(opacity >= PC::kMinAlpha)) return false;
 
-  out.mean2d[0] = cam.fx * c.txz + cam.cx;
-  out.mean2d[1] = cam.fy * c.tyz + cam.cy;
+  out.mean2d[0] = mean_x;
+  out.mean2d[1] = mean_y;
   out.conic[0] = c.cov2d_blur(1, 1) / c.det_blur;
   out.conic[1] = -c.cov2d_blur(0, 1) / c.det_blur;
   out.conic[2] = c.cov2d_blur(0, 0) / c.det_blur;

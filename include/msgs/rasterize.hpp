@@ -58,8 +58,8 @@ class Rasterizer {
  public:
   using Model = GaussianModel<G, S>;
   static constexpr int kBands = G::bands;
-  /// How many Gaussians ahead the gradient reduction prefetches their intersection records.
-  static constexpr std::int64_t kRecordPrefetch = 8;
+  /// How many pairs ahead the gradient reduction prefetches intersection records.
+  static constexpr std::uint64_t kRecordPrefetch = 32;
 
   /// Render `model` from `cam`. Returns the image [H, W, band_count].
   const Image<S>& forward(const Model& model, const Camera<S>& cam, const RenderSettings<S>& settings = {}) {
@@ -120,26 +120,22 @@ class Rasterizer {
 
     const auto t1 = clock::now();
     // Per-Gaussian reduction in a fixed (tile) order, then projection and colour backward.
-    // Gaussians are visited in index order (the model and gradient arrays are then read and
-    // written sequentially); rank_[g] is g's position in the depth order that owns its pairs.
-    const std::int64_t V = std::int64_t(bins_.order.size());
-    rank_.resize(N);
-    for (std::int64_t s = 0; s < V; ++s) rank_[bins_.order[std::size_t(s)]] = std::uint32_t(s);
+    // Gaussians are visited in index order (model, gradients and pair lists are then read and
+    // written sequentially); only their intersection records are scattered over the tile lists.
+    const std::int64_t V = std::int64_t(visible_.size());
+    const std::uint64_t M = bins_.pairs();
     const ProjectCamera& pcam = pcam_;
     const int first = first_, count = count_, deg = sh_degree_;
 #pragma omp parallel for schedule(dynamic, 256)
     for (std::int64_t v = 0; v < V; ++v) {
-      // Records are scattered over the tile lists: fetch those of a later Gaussian ahead of use.
-      if (v + kRecordPrefetch < V) {
-        const std::size_t sp = rank_[visible_[std::size_t(v + kRecordPrefetch)]];
-        for (std::uint64_t m = bins_.pair_offset[sp]; m < bins_.pair_offset[sp + 1]; ++m) {
-          const S* rec = records_.data() + bins_.pair_slot[m] * std::uint64_t(R);
-          __builtin_prefetch(rec);
-          __builtin_prefetch(rec + R - 1);  // a record may straddle two cache lines
-        }
-      }
       const std::uint32_t g = visible_[std::size_t(v)];
-      const std::size_t s = rank_[g];
+      const std::size_t s = std::size_t(v);
+      for (std::uint64_t m = bins_.pair_offset[s]; m < bins_.pair_offset[s + 1]; ++m)
+        if (m + kRecordPrefetch < M) {
+          const S* ahead = records_.data() + bins_.pair_slot[m + kRecordPrefetch] * std::uint64_t(R);
+          __builtin_prefetch(ahead);
+          __builtin_prefetch(ahead + R - 1);  // a record may straddle two cache lines
+        }
       double acc[BlendRecord::kBase + kBands] = {};
       for (std::uint64_t m = bins_.pair_offset[s]; m < bins_.pair_offset[s + 1]; ++m) {
         const S* rec = records_.data() + bins_.pair_slot[m] * std::uint64_t(R);
@@ -380,7 +376,6 @@ class Rasterizer {
   std::vector<std::int32_t> radii_;    // [N, 2]
   std::vector<std::uint8_t> visible_flag_;  // [N]
   std::vector<std::uint32_t> visible_; // [V] ascending
-  std::vector<std::uint32_t> rank_;    // [N] position of a visible Gaussian in bins_.order
   Binning bins_;
 
   // Blend results.
