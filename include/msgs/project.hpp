@@ -170,16 +170,22 @@ inline bool project_fwd(const GaussianGeometry& g, const ProjectCamera& cam, Pro
   }
   c.Rq = detail::quat_to_rotation(c.qhat);
   c.M = c.Rq * c.scale.asDiagonal();
-  const Eigen::Matrix3d sigma = c.M * c.M.transpose();
-  c.cov_cam = cam.R * sigma * cam.R.transpose();
+  // cov_cam = W Sigma W^T = (W M)(W M)^T: one 3x3 product and a symmetric one instead of four.
+  const Eigen::Matrix3d WM = cam.R * c.M;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j <= i; ++j) c.cov_cam(i, j) = c.cov_cam(j, i) = WM.row(i).dot(WM.row(j));
 
   // EWA Jacobian with the generalised tan-fov clamp.
   const double tx = tz * txc;
   const double ty = tz * tyc;
   c.J << cam.fx / tz, 0, -cam.fx * tx / (tz * tz),
          0, cam.fy / tz, -cam.fy * ty / (tz * tz);
-  c.cov2d = c.J * c.cov_cam * c.J.transpose();
-  c.cov2d(0, 1) = c.cov2d(1, 0) = 0.5 * (c.cov2d(0, 1) + c.cov2d(1, 0));
+  // cov2d = J cov_cam J^T = (J W M)(J W M)^T, with J's zeros skipped; symmetric by construction.
+  const Eigen::RowVector3d T0 = c.J(0, 0) * WM.row(0) + c.J(0, 2) * WM.row(2);
+  const Eigen::RowVector3d T1 = c.J(1, 1) * WM.row(1) + c.J(1, 2) * WM.row(2);
+  c.cov2d(0, 0) = T0.dot(T0);
+  c.cov2d(1, 1) = T1.dot(T1);
+  c.cov2d(0, 1) = c.cov2d(1, 0) = T0.dot(T1);
   c.cov2d_blur = c.cov2d;
   c.cov2d_blur(0, 0) += PC::kDilation;
   c.cov2d_blur(1, 1) += PC::kDilation;
