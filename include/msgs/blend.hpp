@@ -63,6 +63,24 @@ struct SplatRowTerms {
   void sigma_into(V& out, S dy, int h) const { out = (half_a_dx2[h] + half_c * dy * dy) + b_dx[h] * dy; }
 };
 
+/// A splat's fragment opacity along one chunk of a tile row: sigma, e = exp(-sigma), the unclamped
+/// falloff o e and alpha = min(0.99, o e). The forward and the backward both fill it through
+/// alpha_into, so that they take and skip exactly the same fragments.
+template <class S>
+struct RowAlpha {
+  using V = typename RowVec<S>::V;
+  V sigma, e, falloff, alpha;
+};
+
+template <class S>
+inline void alpha_into(RowAlpha<S>& out, const SplatRowTerms<S>& terms, S opacity, S dy, int h,
+                       const typename RowVec<S>::V& max_alpha) {
+  terms.sigma_into(out.sigma, dy, h);
+  exp_neg_into(out.e, out.sigma);
+  out.falloff = opacity * out.e;
+  out.alpha = out.falloff < max_alpha ? out.falloff : max_alpha;
+}
+
 }  // namespace detail
 
 /// Read-only inputs of the blend stage for one frame.
@@ -199,13 +217,11 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
       detail::broadcast(took, 0);
       for (int h = 0; h < NH; ++h) {
         const int q = r * NH + h;
-        V sigma, e;
-        terms.sigma_into(sigma, dy, h);
-        detail::exp_neg_into(e, sigma);
-        const V falloff = s.o * e;
-        const V alpha = falloff < max_alpha ? falloff : max_alpha;
+        detail::RowAlpha<S> f;
+        detail::alpha_into(f, terms, s.o, dy, h, max_alpha);
+        const V alpha = f.alpha;
         const V t = T[q];
-        const M ok = (live[q] > zero) & (sigma >= zero) & (alpha >= min_alpha);
+        const M ok = (live[q] > zero) & (f.sigma >= zero) & (alpha >= min_alpha);
         const V next_T = t * (one - alpha);
         const M stop = ok & (next_T <= min_T);
         const M take = ok & ~stop;
@@ -334,12 +350,10 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
       const S dy = S(tb.y0 + r) + S(0.5) - s.my;
       for (int h = 0; h < NH; ++h) {
         const int q = r * NH + h;
-        V sigma, e;
-        terms.sigma_into(sigma, dy, h);
-        detail::exp_neg_into(e, sigma);
-        const V falloff = s.o * e;
-        const V alpha = falloff < max_alpha ? falloff : max_alpha;
-        const M ok = __builtin_convertvector(k < last[q], M) & (sigma >= zero) & (alpha >= min_alpha);
+        detail::RowAlpha<S> f;
+        detail::alpha_into(f, terms, s.o, dy, h, max_alpha);
+        const V alpha = f.alpha, falloff = f.falloff, e = f.e;
+        const M ok = __builtin_convertvector(k < last[q], M) & (f.sigma >= zero) & (alpha >= min_alpha);
         const V ra = one / (one - alpha);
         const V Ti = ok ? T[q] * ra : T[q];
         const V fac = alpha * Ti;
