@@ -25,10 +25,10 @@ struct Splat {
   PixelRect rect;  ///< pixels that may receive alpha >= 1/255
 };
 
-/// Blending constants (REFERENCE §6).
 /// How many tile-list entries ahead the blend loops prefetch splat data (random access by id).
 inline constexpr std::uint64_t kPrefetchDistance = 4;
 
+/// Blending constants (REFERENCE §6).
 template <class S>
 struct BlendConstants {
   static constexpr S kMaxAlpha = S(0.99);

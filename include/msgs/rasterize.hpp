@@ -129,15 +129,13 @@ class Rasterizer {
 #pragma omp parallel for schedule(dynamic, 256)
     for (std::int64_t v = 0; v < V; ++v) {
       const std::uint32_t g = visible_[std::size_t(v)];
-      const std::size_t s = std::size_t(v);
-      for (std::uint64_t m = bins_.pair_offset[s]; m < bins_.pair_offset[s + 1]; ++m)
+      double acc[BlendRecord::kBase + kBands] = {};
+      for (std::uint64_t m = bins_.pair_offset[std::size_t(v)]; m < bins_.pair_offset[std::size_t(v) + 1]; ++m) {
         if (m + kRecordPrefetch < M) {
           const S* ahead = records_.data() + bins_.pair_slot[m + kRecordPrefetch] * std::uint64_t(R);
           __builtin_prefetch(ahead);
           __builtin_prefetch(ahead + R - 1);  // a record may straddle two cache lines
         }
-      double acc[BlendRecord::kBase + kBands] = {};
-      for (std::uint64_t m = bins_.pair_offset[s]; m < bins_.pair_offset[s + 1]; ++m) {
         const S* rec = records_.data() + bins_.pair_slot[m] * std::uint64_t(R);
         for (int l = 0; l < R; ++l) acc[l] += double(rec[l]);
       }
