@@ -42,6 +42,8 @@ constexpr const char* kUsage =
     "                    opacity < 0.1, reset to 0.2) or gsplat (3DGS/gsplat: grad 0.0002, prune < 0.005,\n"
     "                    reset to 0.01); MSAD and ExtADC modify either as in the paper\n"
     "  --bands LIST      train only these bands (comma separated ids)\n"
+    "  --max-gaussians N densification grows each model to at most N Gaussians, largest\n"
+    "                    gradients first (default 0: no limit)\n"
     "  --seed S          seed of sampling, backgrounds and initial colours (default 0)\n"
     "  --orient MODE     center (default: mean camera up -> +z, mean camera position -> origin,\n"
     "                    recorded as `transform` in result.json) or none (keep the dataset's coordinates;\n"
@@ -61,7 +63,7 @@ using msgs::cli::split_list;
 int run_train(const std::vector<std::string>& argv) {
   const msgs::cli::Args args(argv,
                              {"data", "out", "strategy", "scale", "sh-degree", "bands", "seed", "checkpoint-every", "orient", "densify",
-                              "sheets"},
+                              "sheets", "max-gaussians"},
                              {"help", "no-orient", "quiet", "resume"});
   if (args.flag("help")) { std::fputs(kUsage, stdout); return 0; }
   if (!args.positional().empty()) throw msgs::cli::UsageError("unexpected argument '" + args.positional()[0] + "'");
@@ -81,6 +83,9 @@ int run_train(const std::vector<std::string>& argv) {
   } catch (const std::invalid_argument& e) {
     throw msgs::cli::UsageError(e.what());
   }
+  const long cap = args.integer("max-gaussians", 0);
+  if (cap < 0) throw msgs::cli::UsageError("--max-gaussians must be >= 0 (0 = no limit)");
+  cfg.max_gaussians = std::size_t(cap);
   const long every = args.integer("checkpoint-every", 0);
   if (every < 0) throw msgs::cli::UsageError("--checkpoint-every must be >= 0");
   cfg.train.checkpoint_every = int(every);

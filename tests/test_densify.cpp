@@ -269,6 +269,49 @@ TEST_CASE("duplicate where the max scale is small, split where it is large, rela
   CHECK(m.size() == 2);
 }
 
+TEST_CASE("max_gaussians: the largest gradients grow first, the rest wait, pruning still applies") {
+  // Five small Gaussians (duplicate candidates) with NDC gradients 0.002, 0.005, 0.003, 0.005, 0.0001
+  // (the last is below the 0.0008 threshold) and one large one (split candidate, gradient 0.004).
+  Model ref = make_model(6);
+  for (int a = 0; a < 3; ++a) ref.log_scales[3 * 5 + a] = float(std::log(0.05));
+  const std::vector<double> grad{0.002, 0.005, 0.003, 0.005, 0.0001, 0.004};
+  auto refine_capped = [&](std::size_t cap, RefineCounts& counts, Model& m) {
+    DensifyConfig cfg = DensifyConfig::msad();
+    cfg.max_gaussians = cap;
+    DensityControl dc(cfg, 1, 0, 1.0);
+    dc.observe(600, 0, grads_with_ndc_norm(grad, 100).absgrad, radii_all(6, 1), 100, 100);
+    m = ref;
+    return dc.refine(600, m, counts);
+  };
+  Model m;
+  RefineCounts c;
+  // Unlimited (0) and a cap that fits everything: 4 duplicates + 1 split = 6 + 4 + 1 = 11.
+  refine_capped(0, c, m);
+  CHECK(c.duplicated == 4);
+  CHECK(c.split == 1);
+  CHECK(m.size() == 11);
+  refine_capped(11, c, m);
+  CHECK(m.size() == 11);
+  // Cap 9 (budget 3): gradients 0.005 (#1), 0.005 (#3, equal: lower index first), 0.004 (#5, a
+  // split adds one) fit; 0.003 and 0.002 wait.
+  const RefinePlan p9 = refine_capped(9, c, m);
+  CHECK(c.duplicated == 2);
+  CHECK(c.split == 1);
+  REQUIRE(m.size() == 9);
+  CHECK(p9.source == std::vector<std::uint32_t>{0, 1, 2, 3, 4, 1, 3, 5, 5});
+  // Cap 8 (budget 2): #1 and #3; the split of #5 would exceed it, and it is not partly applied.
+  refine_capped(8, c, m);
+  CHECK(c.duplicated == 2);
+  CHECK(c.split == 0);
+  CHECK(m.size() == 8);
+  // A model already at or above the cap does not grow, but still prunes.
+  ref.opacity_logits[0] = float(logit(0.01));
+  refine_capped(4, c, m);
+  CHECK(c.duplicated + c.split == 0);
+  CHECK(c.pruned == 1);
+  CHECK(m.size() == 5);
+}
+
 TEST_CASE("split samples keep scale / 1.6 and are distributed as the parent Gaussian") {
   const std::size_t n = 3000;
   Model ref(n);

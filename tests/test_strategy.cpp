@@ -171,7 +171,7 @@ TEST_CASE("the schedule scale reaches every count of every plan") {
   CHECK(joint.schedule.sh_degree_every == 250);
   CHECK(joint.schedule.resolution_every == 150);
   CHECK(joint.densify.refine_every == 5);
-  CHECK(joint.densify.refine_start == 25);
+  CHECK(joint.densify.refine_start == kMinRefineStart);  // 25 scaled, floored to 250
   CHECK(joint.densify.refine_stop == 750);
   CHECK(joint.densify.reset_every == 150);
   CHECK(joint.densify.screen_stop == 200);
@@ -182,7 +182,7 @@ TEST_CASE("the schedule scale reaches every count of every plan") {
   CHECK(msad.densify.refine_every == 15);
   CHECK(msad.densify.reset_every == 450);  // 30 x refine_every
   CHECK(msad.densify.refine_stop == 3000);
-  CHECK(msad.densify.refine_start == 25);
+  CHECK(msad.densify.refine_start == kMinRefineStart);
   CHECK(msad.densify.screen_stop == 200);
 
   const TrainPlan sd = parse_strategy("joint+specdelay", s).plan;

@@ -31,6 +31,8 @@ struct RunConfig {
   /// gsplat's / 3DGS's. MSAD and ExtADC then change it as in the paper.
   DensifyPreset densify = DensifyPreset::MultiSpectral;
   std::vector<std::string> bands;     ///< bands to train (empty: every band of the dataset)
+  /// Most Gaussians densification may grow each model to (DensifyConfig::max_gaussians; 0 = no limit).
+  std::size_t max_gaussians = 0;
   TrainOptions train{};               ///< seed, learning rates, callbacks
   InitConfig init{};                  ///< initialisation from the sparse point cloud
   std::size_t random_init_points = 20000;  ///< used when the dataset has no point cloud
@@ -159,7 +161,8 @@ RunResult run_experiment(const io::Dataset& ds, const RunConfig& cfg, const std:
   const auto t0 = clock::now();
   ScheduleScale scale{cfg.scale};
   scale.validate();
-  const StrategySpec spec = parse_strategy(cfg.strategy, scale, cfg.densify);
+  StrategySpec spec = parse_strategy(cfg.strategy, scale, cfg.densify);
+  spec.plan.densify.max_gaussians = cfg.max_gaussians;
   RunResult res;
   res.strategy = spec.plan.name;
   res.plan = spec.plan;
