@@ -209,10 +209,26 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
     U pos;
     detail::broadcast(pos, std::uint32_t(j - begin + 1));
     const detail::SplatRowTerms<S> terms(s, px);
+    // Rows of the bounding box that the alpha >= 1/255 ellipse misses inside this tile are skipped
+    // after sigma alone (2 vector operations instead of exp, masks and accumulation). The cut is
+    // conservative: past ln(255 o) + 1e-3 the exact path could only reject every lane too, so the
+    // fragments taken are exactly those of the full evaluation.
+    V sigma_cut;
+    detail::broadcast(sigma_cut, S(std::log(S(255) * s.o)) + S(1e-3));
     std::uint32_t rows_blended = 0;
     for (int r = r0; r <= r1; ++r) {
       if (!row_live[r]) continue;
       const S dy = S(tb.y0 + r) + S(0.5) - s.my;
+      {
+        V sg;
+        terms.sigma_into(sg, dy, 0);
+        M near = sg <= sigma_cut;
+        for (int h = 1; h < NH; ++h) {
+          terms.sigma_into(sg, dy, h);
+          near |= sg <= sigma_cut;
+        }
+        if (!detail::any_lane(near)) continue;
+      }
       I took;
       detail::broadcast(took, 0);
       for (int h = 0; h < NH; ++h) {
@@ -259,7 +275,8 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
 
 /// Backward of blend_tile_fwd for one tile: walks the tile's list back to front, rebuilding each
 /// pixel's transmittance by division (alpha <= 0.99 keeps it well conditioned), and writes one
-/// gradient record per intersection into `records` ([M, BlendRecord::size(count)]). Adds the
+/// gradient record per intersection into `records` ([M, BlendRecord::size(count)]) for every
+/// intersection whose row mask is non-zero; the others are left unwritten (their gradient is zero). Adds the
 /// tile's background gradient into `d_background` ([count]). Alpha is evaluated by the same
 /// expressions as in the forward, so both make the same fragment decisions.
 template <class S, int C, int MaxC, bool Depth>
@@ -333,6 +350,10 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
       __builtin_prefetch(in.splats + gp);
       __builtin_prefetch(in.colours + std::size_t(gp) * std::size_t(nc));
     }
+    // A splat the forward blended into no pixel of this tile (its box touches the tile, its
+    // alpha >= 1/255 region does not, or every pixel had stopped) has no gradient here; its record
+    // is left unwritten and the reduction skips it by the same row mask.
+    if (row_mask[jr] == 0) continue;
     const std::uint32_t g = list[jr];
     const Splat<S> s = in.splats[g];
     U k;  // a pixel blended this splat iff k < last
@@ -396,9 +417,8 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
     rec[BlendRecord::kDepth] = Depth ? sum[kDep] : S(0);
     for (int ch = 0; ch < nc; ++ch) rec[BlendRecord::kBase + ch] = sum[kCol + ch];
   }
-  // Splats behind every pixel's last blended one received no gradient.
-  for (std::uint64_t j = begin + max_last; j < end; ++j)
-    for (int l = 0; l < R; ++l) records[j * std::uint64_t(R) + std::uint64_t(l)] = S(0);
+  // Splats behind every pixel's last blended one have row mask 0 (see blend_tile_fwd): their
+  // records are not written either.
 }
 
 }  // namespace msgs

@@ -136,7 +136,9 @@ class Rasterizer {
           __builtin_prefetch(ahead);
           __builtin_prefetch(ahead + R - 1);  // a record may straddle two cache lines
         }
-        const S* rec = records_.data() + bins_.pair_slot[m] * std::uint64_t(R);
+        const std::uint64_t slot = bins_.pair_slot[m];
+        if (row_mask_[slot] == 0) continue;  // blended nowhere in that tile: no record written
+        const S* rec = records_.data() + slot * std::uint64_t(R);
         for (int l = 0; l < R; ++l) acc[l] += double(rec[l]);
       }
       ProjectedGrad pg;
