@@ -2,6 +2,7 @@
 // `msgs train`: train a strategy on a dataset and write models, configuration and per-band metrics.
 #include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <filesystem>
@@ -44,6 +45,8 @@ constexpr const char* kUsage =
     "  --bands LIST      train only these bands (comma separated ids)\n"
     "  --max-gaussians N densification grows each model to at most N Gaussians, largest\n"
     "                    gradients first (default 0: no limit)\n"
+    "  --lr-sh-dc X      Adam learning rate of the SH DC (base colour) coefficients (default 0.0025,\n"
+    "                    the reference's); short schedules may need more: see README\n"
     "  --seed S          seed of sampling, backgrounds and initial colours (default 0)\n"
     "  --orient MODE     center (default: mean camera up -> +z, mean camera position -> origin,\n"
     "                    recorded as `transform` in result.json) or none (keep the dataset's coordinates;\n"
@@ -63,7 +66,7 @@ using msgs::cli::split_list;
 int run_train(const std::vector<std::string>& argv) {
   const msgs::cli::Args args(argv,
                              {"data", "out", "strategy", "scale", "sh-degree", "bands", "seed", "checkpoint-every", "orient", "densify",
-                              "sheets", "max-gaussians"},
+                              "sheets", "max-gaussians", "lr-sh-dc"},
                              {"help", "no-orient", "quiet", "resume"});
   if (args.flag("help")) { std::fputs(kUsage, stdout); return 0; }
   if (!args.positional().empty()) throw msgs::cli::UsageError("unexpected argument '" + args.positional()[0] + "'");
@@ -76,6 +79,9 @@ int run_train(const std::vector<std::string>& argv) {
   if (deg < 0 || deg > 3) throw msgs::cli::UsageError("--sh-degree must be 0..3");
   cfg.bands = split_list(args.get("bands"));
   cfg.train.seed = std::uint64_t(args.integer("seed", 0));
+  cfg.train.adam.lr_sh_dc = args.number("lr-sh-dc", cfg.train.adam.lr_sh_dc);
+  if (!(std::isfinite(cfg.train.adam.lr_sh_dc) && cfg.train.adam.lr_sh_dc > 0))
+    throw msgs::cli::UsageError("--lr-sh-dc must be a finite number > 0");
   cfg.init.seed = std::uint32_t(cfg.train.seed);
   cfg.resume = args.flag("resume");
   try {
@@ -122,6 +128,7 @@ int run_train(const std::vector<std::string>& argv) {
   j["data"] = data.string();
   j["sh_degree"] = deg;
   j["seed"] = cfg.train.seed;
+  j["lr_sh_dc"] = cfg.train.adam.lr_sh_dc;
   j["transform"] = std::vector<float>(ds.transform.data(), ds.transform.data() + 16);
   msgs::io::write_text_atomic(out / "result.json", j.dump(2) + "\n");
   const std::string table = msgs::cli::metrics_markdown(res.metrics);
