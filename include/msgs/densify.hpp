@@ -567,36 +567,6 @@ class DensityControl {
     return rep;
   }
 
-  /// Keep only as many growth candidates as fit under max_gaussians: a duplicate adds one
-  /// Gaussian, a split split_samples - 1, a Gaussian both duplicated and split split_samples.
-  /// Candidates are taken by decreasing average gradient (index order among equals), so the
-  /// choice is deterministic and independent of thread count.
-  void limit_growth(std::size_t n, std::vector<bool>& dup, std::vector<bool>& split) const {
-    const std::size_t per_split = static_cast<std::size_t>(cfg_.split_samples) - 1;
-    auto growth_of = [&](std::size_t i) { return (dup[i] ? 1u : 0u) + (split[i] ? per_split : 0u); };
-    std::size_t want = 0;
-    std::vector<std::size_t> cand;
-    for (std::size_t i = 0; i < n; ++i)
-      if (dup[i] || split[i]) {
-        cand.push_back(i);
-        want += growth_of(i);
-      }
-    const std::size_t budget = n >= cfg_.max_gaussians ? 0 : cfg_.max_gaussians - n;
-    if (want <= budget) return;
-    std::stable_sort(cand.begin(), cand.end(),
-                     [&](std::size_t a, std::size_t b) { return stats_.max_average(a) > stats_.max_average(b); });
-    std::size_t used = 0;
-    for (std::size_t i : cand) {
-      const std::size_t g = growth_of(i);
-      if (used + g <= budget) {
-        used += g;
-      } else {
-        dup[i] = false;
-        split[i] = false;
-      }
-    }
-  }
-
   /// Grow and prune now (whatever the schedule says; `step` selects the screen-space and
   /// after-reset rules and seeds the split samples), then zero the statistics. Returns the plan,
   /// which the caller applies to every other per-Gaussian array (apply_zero_fresh for optimiser
@@ -698,6 +668,36 @@ class DensityControl {
   }
 
  private:
+  /// Keep only as many growth candidates as fit under max_gaussians: a duplicate adds one
+  /// Gaussian, a split split_samples - 1, a Gaussian both duplicated and split split_samples.
+  /// Candidates are taken by decreasing average gradient (index order among equals), so the
+  /// choice is deterministic and independent of thread count.
+  void limit_growth(std::size_t n, std::vector<bool>& dup, std::vector<bool>& split) const {
+    const std::size_t per_split = static_cast<std::size_t>(cfg_.split_samples) - 1;
+    auto growth_of = [&](std::size_t i) { return (dup[i] ? 1u : 0u) + (split[i] ? per_split : 0u); };
+    std::size_t want = 0;
+    std::vector<std::size_t> cand;
+    for (std::size_t i = 0; i < n; ++i)
+      if (dup[i] || split[i]) {
+        cand.push_back(i);
+        want += growth_of(i);
+      }
+    const std::size_t budget = n >= cfg_.max_gaussians ? 0 : cfg_.max_gaussians - n;
+    if (want <= budget) return;
+    std::stable_sort(cand.begin(), cand.end(),
+                     [&](std::size_t a, std::size_t b) { return stats_.max_average(a) > stats_.max_average(b); });
+    std::size_t used = 0;
+    for (std::size_t i : cand) {
+      const std::size_t g = growth_of(i);
+      if (used + g <= budget) {
+        used += g;
+      } else {
+        dup[i] = false;
+        split[i] = false;
+      }
+    }
+  }
+
   bool paused_at(long long step) const { return cfg_.pause_begin < step && step <= cfg_.pause_end; }
 
   template <class T>
