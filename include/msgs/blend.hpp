@@ -22,8 +22,17 @@ struct Splat {
   S a, b, c;    ///< conic: sigma = 0.5 (a dx^2 + c dy^2) + b dx dy
   S o;          ///< opacity (after antialiasing compensation)
   S z;          ///< camera-space depth
+  S sigma_cut;  ///< ln(255 o) + 1e-3: beyond this sigma alpha < 1/255 (see with_sigma_cut)
   PixelRect rect;  ///< pixels that may receive alpha >= 1/255
 };
+
+/// Sets s.sigma_cut from s.o: a conservative bound past which o e^-sigma < 1/255, so that the
+/// blend can skip a tile row after sigma alone. The 1e-3 margin covers the rounding of the log and
+/// of the exponential, so the exact path could only have rejected those fragments too.
+template <class S>
+inline void set_sigma_cut(Splat<S>& s) {
+  s.sigma_cut = S(std::log(S(255) * s.o)) + S(1e-3);
+}
 
 /// How many tile-list entries ahead the blend loops prefetch splat data (random access by id).
 inline constexpr std::uint64_t kPrefetchDistance = 4;
@@ -72,13 +81,19 @@ struct RowAlpha {
   V sigma, e, falloff, alpha;
 };
 
+/// The rest of alpha_into once out.sigma is set (the forward reuses the sigma of its row test).
+template <class S>
+inline void alpha_from_sigma(RowAlpha<S>& out, S opacity, const typename RowVec<S>::V& max_alpha) {
+  exp_neg_into(out.e, out.sigma);
+  out.falloff = opacity * out.e;
+  out.alpha = out.falloff < max_alpha ? out.falloff : max_alpha;
+}
+
 template <class S>
 inline void alpha_into(RowAlpha<S>& out, const SplatRowTerms<S>& terms, S opacity, S dy, int h,
                        const typename RowVec<S>::V& max_alpha) {
   terms.sigma_into(out.sigma, dy, h);
-  exp_neg_into(out.e, out.sigma);
-  out.falloff = opacity * out.e;
-  out.alpha = out.falloff < max_alpha ? out.falloff : max_alpha;
+  alpha_from_sigma(out, opacity, max_alpha);
 }
 
 }  // namespace detail
@@ -154,10 +169,10 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
   constexpr int NH = RV::kChunks, L = RV::kLanes, Q = TS * NH;  // vectors per row, lanes each, per tile
   const int nc = C > 0 ? C : in.count;
   const detail::TileBounds<S> tb(*in.grid, tile);
-  // Pixel (x, y) is lane x % L of vector y * NH + x / L.
-  V T[Q], live[Q], acc[NC][Q], dacc[Depth ? Q : 1];
+  // Pixel (x, y) is lane x % L of vector y * NH + x / L. T > 0 marks a live pixel: a pixel that
+  // has stopped keeps -T (T > 1e-4 there, so the sign is unambiguous), lanes outside the image hold -1.
+  V T[Q], acc[NC][Q], dacc[Depth ? Q : 1];
   U last[Q];
-  I blended[Q];
   V zero, one, px[NH], max_alpha, min_alpha, min_T;
   detail::broadcast(zero, S(0));
   detail::broadcast(one, S(1));
@@ -168,10 +183,8 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
     for (int i = 0; i < L; ++i) px[h][i] = S(tb.x0 + h * L + i) + S(0.5);  // pixel centres
   for (int q = 0; q < Q; ++q) {
     const int r = q / NH, h = q % NH;
-    T[q] = one;
-    for (int i = 0; i < L; ++i) live[q][i] = (h * L + i < tb.w && r < tb.h) ? S(1) : S(0);
+    for (int i = 0; i < L; ++i) T[q][i] = (h * L + i < tb.w && r < tb.h) ? S(1) : S(-1);
     detail::broadcast(last[q], 0u);
-    detail::broadcast(blended[q], 0);
     for (int ch = 0; ch < NC; ++ch) acc[ch][q] = zero;
     if constexpr (Depth) dacc[q] = zero;
   }
@@ -182,14 +195,14 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
   for (int r = 0; r < TS; ++r) row_live[r] = r < tb.h;
   const std::uint64_t begin = in.bins->tile_offset[std::size_t(tile)], end = in.bins->tile_offset[std::size_t(tile) + 1];
   const std::uint32_t* list = in.bins->tile_list.data();
-  std::uint64_t j = begin;
+  std::uint64_t j = begin, fragments = 0;
   for (; j < end; ++j) {
     if ((j - begin) % kCheckEvery == 0 && j != begin) {
       bool any = false;
       for (int r = 0; r < tb.h; ++r) {
         if (row_live[r]) {
-          M m = live[r * NH] > zero;
-          for (int h = 1; h < NH; ++h) m |= live[r * NH + h] > zero;
+          M m = T[r * NH] > zero;
+          for (int h = 1; h < NH; ++h) m |= T[r * NH + h] > zero;
           row_live[r] = detail::any_lane(m);
         }
         any = any || row_live[r];
@@ -204,70 +217,65 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
     const std::uint32_t g = list[j];
     const Splat<S> s = in.splats[g];
     const int r0 = std::max(s.rect.y0 - tb.y0, 0), r1 = std::min(s.rect.y1 - tb.y0, tb.h - 1);
-    S col[NC];
-    for (int ch = 0; ch < NC; ++ch) col[ch] = ch < nc ? in.colours[std::size_t(g) * std::size_t(nc) + std::size_t(ch)] : S(0);
+    V col[NC];
+    for (int ch = 0; ch < NC; ++ch)
+      detail::broadcast(col[ch], ch < nc ? in.colours[std::size_t(g) * std::size_t(nc) + std::size_t(ch)] : S(0));
+    V z;
+    detail::broadcast(z, s.z);
     U pos;
     detail::broadcast(pos, std::uint32_t(j - begin + 1));
     const detail::SplatRowTerms<S> terms(s, px);
     // Rows of the bounding box that the alpha >= 1/255 ellipse misses inside this tile are skipped
     // after sigma alone (2 vector operations instead of exp, masks and accumulation). The cut is
-    // conservative: past ln(255 o) + 1e-3 the exact path could only reject every lane too, so the
+    // conservative (set_sigma_cut): the exact path could only reject every lane too, so the
     // fragments taken are exactly those of the full evaluation.
     V sigma_cut;
-    detail::broadcast(sigma_cut, S(std::log(S(255) * s.o)) + S(1e-3));
+    detail::broadcast(sigma_cut, s.sigma_cut);
     std::uint32_t rows_blended = 0;
     for (int r = r0; r <= r1; ++r) {
       if (!row_live[r]) continue;
       const S dy = S(tb.y0 + r) + S(0.5) - s.my;
-      {
-        V sg;
-        terms.sigma_into(sg, dy, 0);
-        M near = sg <= sigma_cut;
-        for (int h = 1; h < NH; ++h) {
-          terms.sigma_into(sg, dy, h);
-          near |= sg <= sigma_cut;
-        }
-        if (!detail::any_lane(near)) continue;
+      detail::RowAlpha<S> f[NH];
+      terms.sigma_into(f[0].sigma, dy, 0);
+      M near = f[0].sigma <= sigma_cut;
+      for (int h = 1; h < NH; ++h) {
+        terms.sigma_into(f[h].sigma, dy, h);
+        near |= f[h].sigma <= sigma_cut;
       }
-      I took;
-      detail::broadcast(took, 0);
+      if (!detail::any_lane(near)) continue;
+      std::uint32_t took = 0;
       for (int h = 0; h < NH; ++h) {
         const int q = r * NH + h;
-        detail::RowAlpha<S> f;
-        detail::alpha_into(f, terms, s.o, dy, h, max_alpha);
-        const V alpha = f.alpha;
+        detail::alpha_from_sigma(f[h], s.o, max_alpha);
+        const V alpha = f[h].alpha;
         const V t = T[q];
-        const M ok = (live[q] > zero) & (f.sigma >= zero) & (alpha >= min_alpha);
+        const M ok = (t > zero) & (f[h].sigma >= zero) & (alpha >= min_alpha);
         const V next_T = t * (one - alpha);
         const M stop = ok & (next_T <= min_T);
         const M take = ok & ~stop;
         const V weight = take ? alpha * t : zero;
-        for (int ch = 0; ch < NC; ++ch) acc[ch][q] += weight * col[ch];
-        if constexpr (Depth) dacc[q] += weight * s.z;
-        T[q] = take ? next_T : t;
-        live[q] = stop ? zero : live[q];
-        const I take32 = __builtin_convertvector(take, I);
-        last[q] = take32 ? pos : last[q];
-        blended[q] -= take32;  // a true lane is -1
-        took |= take32;
+        for (int ch = 0; ch < NC; ++ch) detail::fmadd_into(acc[ch][q], weight, col[ch], acc[ch][q]);
+        if constexpr (Depth) detail::fmadd_into(dacc[q], weight, z, dacc[q]);
+        T[q] = take ? next_T : (stop ? -t : t);
+        last[q] = __builtin_convertvector(take, I) ? pos : last[q];
+        took |= detail::lane_bits(take) << (h * L);
       }
-      rows_blended |= std::uint32_t(detail::any_lane(took)) << r;
+      fragments += std::uint64_t(std::popcount(took));
+      rows_blended |= std::uint32_t(took != 0) << r;
     }
     out.row_mask[j] = std::uint16_t(rows_blended);
   }
   for (; j < end; ++j) out.row_mask[j] = 0;  // entries after every pixel stopped
-  std::uint64_t fragments = 0;
-  for (int q = 0; q < Q; ++q)
-    for (int i = 0; i < L; ++i) fragments += std::uint64_t(blended[q][i]);
   const int W = in.grid->width;
   for (int y = 0; y < tb.h; ++y)
     for (int x = 0; x < tb.w; ++x) {
       const int q = y * NH + x / L, i = x % L;
       const std::size_t pix = std::size_t(tb.y0 + y) * std::size_t(W) + std::size_t(tb.x0 + x);
-      for (int ch = 0; ch < nc; ++ch) out.image[pix * std::size_t(nc) + std::size_t(ch)] = acc[ch][q][i] + T[q][i] * in.background[ch];
-      out.alpha[pix] = S(1) - T[q][i];
+      for (int ch = 0; ch < nc; ++ch) out.image[pix * std::size_t(nc) + std::size_t(ch)] = acc[ch][q][i] + std::abs(T[q][i]) * in.background[ch];
+      const S t = std::abs(T[q][i]);
+      out.alpha[pix] = S(1) - t;
       if constexpr (Depth) out.depth[pix] = dacc[q][i];
-      out.transmittance[pix] = T[q][i];
+      out.transmittance[pix] = t;
       out.last[pix] = last[q][i];
     }
   return fragments;
@@ -358,8 +366,11 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
     const Splat<S> s = in.splats[g];
     U k;  // a pixel blended this splat iff k < last
     detail::broadcast(k, std::uint32_t(jr - begin));
-    S col[NC];
-    for (int ch = 0; ch < NC; ++ch) col[ch] = ch < nc ? in.colours[std::size_t(g) * std::size_t(nc) + std::size_t(ch)] : S(0);
+    V col[NC];
+    for (int ch = 0; ch < NC; ++ch)
+      detail::broadcast(col[ch], ch < nc ? in.colours[std::size_t(g) * std::size_t(nc) + std::size_t(ch)] : S(0));
+    V z;
+    detail::broadcast(z, s.z);
     V lane[NL * NH];  // [accumulator][chunk]
     for (int l = 0; l < NL * NH; ++l) lane[l] = zero;
     const detail::SplatRowTerms<S> terms(s, px);
@@ -369,6 +380,14 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
     for (std::uint32_t rows = row_mask[jr]; rows != 0; rows &= rows - 1) {
       const int r = std::countr_zero(rows);
       const S dy = S(tb.y0 + r) + S(0.5) - s.my;
+      V dyv;
+      detail::broadcast(dyv, dy);
+      // acc = ok ? acc + a b : acc, one masked FMA with AVX-512.
+      const auto add_if = [](V& acc, const M& ok, const V& a, const V& b) {
+        V t;
+        detail::fmadd_into(t, a, b, acc);
+        acc = ok ? t : acc;
+      };
       for (int h = 0; h < NH; ++h) {
         const int q = r * NH + h;
         detail::RowAlpha<S> f;
@@ -379,22 +398,24 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
         const V Ti = ok ? T[q] * ra : T[q];
         const V fac = alpha * Ti;
         V cd = col[0] * dimg[0][q];  // colour . dL/dimage of this pixel
-        for (int ch = 1; ch < NC; ++ch) cd += col[ch] * dimg[ch][q];
-        if constexpr (Depth) cd += s.z * dD[q];
-        const V v_alpha = ok ? Ti * cd + ra * (t_final_terms[q] - B[q]) : zero;
-        B[q] += ok ? fac * cd : zero;
-        for (int ch = 0; ch < NC; ++ch) lane[(kCol + ch) * NH + h] += ok ? fac * dimg[ch][q] : zero;
-        if constexpr (Depth) lane[kDep * NH + h] += ok ? fac * dD[q] : zero;
+        for (int ch = 1; ch < NC; ++ch) detail::fmadd_into(cd, col[ch], dimg[ch][q], cd);
+        if constexpr (Depth) detail::fmadd_into(cd, z, dD[q], cd);
+        V v_alpha;
+        detail::fmadd_into(v_alpha, Ti, cd, ra * (t_final_terms[q] - B[q]));
+        v_alpha = ok ? v_alpha : zero;
+        add_if(B[q], ok, fac, cd);
+        for (int ch = 0; ch < NC; ++ch) add_if(lane[(kCol + ch) * NH + h], ok, fac, dimg[ch][q]);
+        if constexpr (Depth) add_if(lane[kDep * NH + h], ok, fac, dD[q]);
         // alpha = min(0.99, o e^-sigma): no gradient through the clamp.
         const M free = falloff < max_alpha;
         const V v_sigma = free ? -v_alpha * falloff : zero;
-        lane[kOp * NH + h] += free ? v_alpha * e : zero;
+        add_if(lane[kOp * NH + h], free, v_alpha, e);
         const V v_dx = v_sigma * terms.dx[h], v_dy = v_sigma * dy;
         lane[kP * NH + h] += v_dx;
         lane[kQ * NH + h] += v_dy;
-        lane[kAA * NH + h] += v_dx * terms.dx[h];
-        lane[kBB * NH + h] += v_dx * dy;
-        lane[kCC * NH + h] += v_dy * dy;
+        detail::fmadd_into(lane[kAA * NH + h], v_dx, terms.dx[h], lane[kAA * NH + h]);
+        detail::fmadd_into(lane[kBB * NH + h], v_dx, dyv, lane[kBB * NH + h]);
+        detail::fmadd_into(lane[kCC * NH + h], v_dy, dyv, lane[kCC * NH + h]);
         V gx = v_sigma * (a_dx[h] + s.b * dy), gy = v_sigma * (terms.b_dx[h] + s.c * dy);  // -dL/dmean per pixel
         detail::abs_into(gx, gx);
         detail::abs_into(gy, gy);

@@ -282,6 +282,7 @@ class Rasterizer {
       s.a = S(pg.conic[0]); s.b = S(pg.conic[1]); s.c = S(pg.conic[2]);
       s.o = S(pg.opacity);
       s.z = S(pg.depth);
+      set_sigma_cut(s);
       s.rect = rect;
       depth_[std::size_t(i)] = S(pg.depth);
       for (int ch = 0; ch < count; ++ch) colours_[std::size_t(i) * std::size_t(count) + std::size_t(ch)] = S(col[ch]);

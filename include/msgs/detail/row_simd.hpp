@@ -48,10 +48,13 @@ struct RowVec {
   typedef std::int32_t I __attribute__((vector_size(kLanes * sizeof(std::int32_t))));
 };
 
-/// Every lane of `v` set to `x` (exact, also for -0).
+/// Every lane of `v` set to `x` (exact, also for -0 and NaN: x - 0 is x). Written as a
+/// vector-scalar operation, which GCC always emits as one splat; an element-wise loop is sometimes
+/// compiled to one masked insert per lane.
 template <class V, class S>
 inline void broadcast(V& v, S x) {
-  for (int i = 0; i < int(sizeof(V) / sizeof(S)); ++i) v[i] = x;
+  using Lane = std::remove_cvref_t<decltype(v[0])>;
+  v = Lane(x) - V{};
 }
 
 /// Is any lane of mask `m` set? (One test instruction on x86; a loop elsewhere.)
@@ -75,6 +78,35 @@ inline bool any_lane(const M& m) {
   bool any = false;
   for (int i = 0; i < int(sizeof(M) / sizeof(m[0])); ++i) any = any || m[i] != 0;
   return any;
+}
+
+/// Bit i set when lane i of mask `m` (all ones = true) is set: one instruction on x86.
+template <class M>
+inline std::uint32_t lane_bits(const M& m) {
+  constexpr int n = int(sizeof(M) / sizeof(m[0]));
+  static_assert(n <= 32);
+#if defined(__AVX512F__)
+  if constexpr (sizeof(M) == 64) {
+    const __m512i v = std::bit_cast<__m512i>(m);
+    if constexpr (n == 16) return _mm512_test_epi32_mask(v, v);
+    else return _mm512_test_epi64_mask(v, v);
+  }
+#endif
+#if defined(__AVX__)
+  if constexpr (sizeof(M) == 32) {
+    if constexpr (n == 8) return std::uint32_t(_mm256_movemask_ps(std::bit_cast<__m256>(m)));
+    else return std::uint32_t(_mm256_movemask_pd(std::bit_cast<__m256d>(m)));
+  }
+#endif
+#if defined(__SSE2__)
+  if constexpr (sizeof(M) == 16) {
+    if constexpr (n == 4) return std::uint32_t(_mm_movemask_ps(std::bit_cast<__m128>(m)));
+    else return std::uint32_t(_mm_movemask_pd(std::bit_cast<__m128d>(m)));
+  }
+#endif
+  std::uint32_t bits = 0;
+  for (int i = 0; i < n; ++i) bits |= std::uint32_t(m[i] != 0) << i;
+  return bits;
 }
 
 /// out = |v| lane by lane (clears the sign bits).
@@ -108,6 +140,29 @@ inline void halve_to_four(const Vv& v, S* out4) {
 template <class S, class V>
 inline void sum_rows(const V* v, int n, S* sum) {
   constexpr int NH = RowVec<S>::kChunks, L = RowVec<S>::kLanes;
+  if constexpr (L == 16 && NH == 1) {
+    // One 16-lane vector per row: reduce four rows at a time with shuffles that pack the partial
+    // sums of different rows into one vector (the same tree, a third of the instructions).
+    V zero;
+    broadcast(zero, S(0));
+    for (int l0 = 0; l0 < n; l0 += 4) {
+      const V a = v[l0], b = l0 + 1 < n ? v[l0 + 1] : zero, c = l0 + 2 < n ? v[l0 + 2] : zero,
+              d = l0 + 3 < n ? v[l0 + 3] : zero;
+      // lane i + lane i + 8: rows a, b in one vector, c, d in another.
+      const V ab = __builtin_shufflevector(a, b, 0, 1, 2, 3, 4, 5, 6, 7, 16, 17, 18, 19, 20, 21, 22, 23) +
+                   __builtin_shufflevector(a, b, 8, 9, 10, 11, 12, 13, 14, 15, 24, 25, 26, 27, 28, 29, 30, 31);
+      const V cd = __builtin_shufflevector(c, d, 0, 1, 2, 3, 4, 5, 6, 7, 16, 17, 18, 19, 20, 21, 22, 23) +
+                   __builtin_shufflevector(c, d, 8, 9, 10, 11, 12, 13, 14, 15, 24, 25, 26, 27, 28, 29, 30, 31);
+      // then i + i + 4: four partials q0..q3 of row a, b, c, d in lanes 0-3, 4-7, 8-11, 12-15.
+      const V u = __builtin_shufflevector(ab, cd, 0, 1, 2, 3, 8, 9, 10, 11, 16, 17, 18, 19, 24, 25, 26, 27) +
+                  __builtin_shufflevector(ab, cd, 4, 5, 6, 7, 12, 13, 14, 15, 20, 21, 22, 23, 28, 29, 30, 31);
+      // then (q0 + q2) + (q1 + q3) in the first lane of each group.
+      const V w = u + __builtin_shufflevector(u, u, 2, 3, 0, 1, 6, 7, 4, 5, 10, 11, 8, 9, 14, 15, 12, 13);
+      const V x = w + __builtin_shufflevector(w, w, 1, 0, 3, 2, 5, 4, 7, 6, 9, 8, 11, 10, 13, 12, 15, 14);
+      for (int k = 0; k < 4 && l0 + k < n; ++k) sum[l0 + k] = x[4 * k];
+    }
+    return;
+  }
   for (int l = 0; l < n; ++l) {
     V c[NH];
     for (int h = 0; h < NH; ++h) c[h] = v[l * NH + h];
@@ -144,6 +199,40 @@ inline void fmadd_into(T& out, const T& a, const T& b, const T& c) {
   out = a * b + c;
 }
 
+/// out = max(min(v, hi), lo) lane by lane, where min(a, b) = a < b ? a : b and max(a, b) =
+/// a > b ? a : b: a NaN in `v` becomes `hi`. One MINPS and one MAXPS on x86 (GCC does not match the
+/// generic form to them for vector-extension types).
+template <class T>
+inline void min_max_into(T& out, const T& v, const T& hi, const T& lo) {
+  if constexpr (std::is_same_v<std::remove_cvref_t<decltype(v[0])>, float>) {
+#if defined(__AVX512F__)
+    if constexpr (sizeof(T) == 64) {
+      // The masked forms with a full mask: GCC 12's _mm512_min_ps/_mm512_max_ps trip
+      // -Wmaybe-uninitialized on their internal undefined pass-through operand.
+      const __m512 h = std::bit_cast<__m512>(hi), l = std::bit_cast<__m512>(lo);
+      out = std::bit_cast<T>(_mm512_mask_max_ps(l, __mmask16(0xffff), _mm512_mask_min_ps(h, __mmask16(0xffff), std::bit_cast<__m512>(v), h), l));
+      return;
+    }
+#endif
+#if defined(__AVX__)
+    if constexpr (sizeof(T) == 32) {
+      out = std::bit_cast<T>(_mm256_max_ps(_mm256_min_ps(std::bit_cast<__m256>(v), std::bit_cast<__m256>(hi)),
+                                           std::bit_cast<__m256>(lo)));
+      return;
+    }
+#endif
+#if defined(__SSE2__)
+    if constexpr (sizeof(T) == 16) {
+      out = std::bit_cast<T>(_mm_max_ps(_mm_min_ps(std::bit_cast<__m128>(v), std::bit_cast<__m128>(hi)),
+                                        std::bit_cast<__m128>(lo)));
+      return;
+    }
+#endif
+  }
+  const T m = v < hi ? v : hi;
+  out = m > lo ? m : lo;
+}
+
 /// out = exp(-s) for s >= 0, lane by lane: the Gaussian falloff of the blend
 /// stage. For float a branch-free Cephes-style polynomial (about 1 ulp; FMA where the target has it);
 /// the input is
@@ -156,9 +245,9 @@ inline void exp_neg_into(T& out, const T& s_in) {
   T zero, hi;
   broadcast(zero, Lane(0));
   broadcast(hi, Lane(87));
-  s = s < zero ? zero : s;
-  s = s > hi ? hi : s;
-  s = s == s ? s : hi;  // NaN -> exp(-87)
+  // min first, with the semantics of x86 MINPS/MAXPS (the second operand wins when the comparison
+  // is false, NaN included): NaN -> 87 -> exp(-87).
+  min_max_into(s, s, hi, zero);
   if constexpr (std::is_same_v<Lane, float>) {
     typedef std::int32_t IV __attribute__((vector_size(sizeof(T))));
     const T x = -s;
