@@ -26,12 +26,17 @@ struct ProjectConstants {
   static constexpr double kMinCompensation = 0.005; ///< floor of the antialiasing opacity factor
 };
 
-/// Camera in the double form the projection uses.
+/// Camera in the double form the projection uses. The projection reads the plain arrays (`rot`,
+/// `trans`); the Eigen members are for callers.
 struct ProjectCamera {
   Eigen::Matrix3d R;
   Eigen::Vector3d t, position;
+  double rot[9];    ///< R, row-major
+  double trans[3];  ///< t
   double fx, fy, cx, cy, near_plane, far_plane;
   int width, height;
+  /// Tan-fov clamp limits of x/z and y/z (generalised for off-centre principal points).
+  double lim_x_pos, lim_x_neg, lim_y_pos, lim_y_neg;
 
   template <class S>
   static ProjectCamera from(const Camera<S>& c) {
@@ -39,9 +44,19 @@ struct ProjectCamera {
     p.R = c.R.template cast<double>();
     p.t = c.t.template cast<double>();
     p.position = -(p.R.transpose() * p.t);
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) p.rot[3 * i + j] = p.R(i, j);
+      p.trans[i] = p.t[i];
+    }
     p.fx = double(c.fx); p.fy = double(c.fy); p.cx = double(c.cx); p.cy = double(c.cy);
     p.near_plane = double(c.near_plane); p.far_plane = double(c.far_plane);
     p.width = c.width; p.height = c.height;
+    using PC = ProjectConstants;
+    const double tan_fovx = 0.5 * p.width / p.fx, tan_fovy = 0.5 * p.height / p.fy;
+    p.lim_x_pos = (p.width - p.cx) / p.fx + PC::kFovClampMargin * tan_fovx;
+    p.lim_x_neg = p.cx / p.fx + PC::kFovClampMargin * tan_fovx;
+    p.lim_y_pos = (p.height - p.cy) / p.fy + PC::kFovClampMargin * tan_fovy;
+    p.lim_y_neg = p.cy / p.fy + PC::kFovClampMargin * tan_fovy;
     return p;
   }
 };
@@ -64,51 +79,72 @@ struct ProjectedGaussian {
   double extent[2] = {0, 0};  ///< half-extent in pixels (x, y) of the region where alpha >= 1/255
 };
 
+// Small fixed-trip loops of the projection are unrolled completely before the vectoriser sees
+// them: vectorised, they mix 8-byte stores with 16/32-byte reloads of the same stack slots, and
+// every such reload stalls on store forwarding (the projection ran ~25% slower).
+#define MSGS_UNROLL _Pragma("GCC unroll 9")
+
 namespace detail {
 
-/// Rotation matrix of a unit quaternion (w, x, y, z).
-inline Eigen::Matrix3d quat_to_rotation(const Eigen::Vector4d& q) {
+// The projection works on plain row-major 3x3 arrays: written out, the small products compile to
+// straight-line scalar code, where Eigen's fixed-size packets stored element by element and
+// reloaded as vectors stall on store forwarding (the projection ran ~25% slower with them).
+
+/// Rotation matrix (row-major) of a unit quaternion (w, x, y, z).
+inline void quat_to_rotation(const double q[4], double R[9]) {
   const double w = q[0], x = q[1], y = q[2], z = q[3];
-  Eigen::Matrix3d R;
-  R << 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-       2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-       2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y);
-  return R;
+  R[0] = 1 - 2 * (y * y + z * z); R[1] = 2 * (x * y - w * z);     R[2] = 2 * (x * z + w * y);
+  R[3] = 2 * (x * y + w * z);     R[4] = 1 - 2 * (x * x + z * z); R[5] = 2 * (y * z - w * x);
+  R[6] = 2 * (x * z - w * y);     R[7] = 2 * (y * z + w * x);     R[8] = 1 - 2 * (x * x + y * y);
 }
 
-/// dL/dq for a unit quaternion q given dL/dR.
-inline Eigen::Vector4d quat_to_rotation_backward(const Eigen::Vector4d& q, const Eigen::Matrix3d& G) {
+/// dL/dq for a unit quaternion q given dL/dR (row-major G).
+inline void quat_to_rotation_backward(const double q[4], const double G[9], double d[4]) {
   const double w = q[0], x = q[1], y = q[2], z = q[3];
-  Eigen::Vector4d d;
-  d[0] = 2 * (-z * G(0, 1) + y * G(0, 2) + z * G(1, 0) - x * G(1, 2) - y * G(2, 0) + x * G(2, 1));
-  d[1] = 2 * (y * G(0, 1) + z * G(0, 2) + y * G(1, 0) - 2 * x * G(1, 1) - w * G(1, 2) + z * G(2, 0) +
-              w * G(2, 1) - 2 * x * G(2, 2));
-  d[2] = 2 * (-2 * y * G(0, 0) + x * G(0, 1) + w * G(0, 2) + x * G(1, 0) + z * G(1, 2) - w * G(2, 0) +
-              z * G(2, 1) - 2 * y * G(2, 2));
-  d[3] = 2 * (-2 * z * G(0, 0) - w * G(0, 1) + x * G(0, 2) + w * G(1, 0) - 2 * z * G(1, 1) + y * G(1, 2) +
-              x * G(2, 0) + y * G(2, 1));
-  return d;
+  auto g = [G](int i, int j) { return G[3 * i + j]; };
+  d[0] = 2 * (-z * g(0, 1) + y * g(0, 2) + z * g(1, 0) - x * g(1, 2) - y * g(2, 0) + x * g(2, 1));
+  d[1] = 2 * (y * g(0, 1) + z * g(0, 2) + y * g(1, 0) - 2 * x * g(1, 1) - w * g(1, 2) + z * g(2, 0) +
+              w * g(2, 1) - 2 * x * g(2, 2));
+  d[2] = 2 * (-2 * y * g(0, 0) + x * g(0, 1) + w * g(0, 2) + x * g(1, 0) + z * g(1, 2) - w * g(2, 0) +
+              z * g(2, 1) - 2 * y * g(2, 2));
+  d[3] = 2 * (-2 * z * g(0, 0) - w * g(0, 1) + x * g(0, 2) + w * g(1, 0) - 2 * z * g(1, 1) + y * g(1, 2) +
+              x * g(2, 0) + y * g(2, 1));
+}
+
+/// C = A B for row-major 3x3 matrices.
+inline void mul33(const double A[9], const double B[9], double C[9]) {
+  MSGS_UNROLL
+  for (int i = 0; i < 3; ++i)
+    MSGS_UNROLL
+    for (int j = 0; j < 3; ++j) C[3 * i + j] = A[3 * i] * B[j] + A[3 * i + 1] * B[3 + j] + A[3 * i + 2] * B[6 + j];
+}
+
+/// C = A^T B for row-major 3x3 matrices.
+inline void mul33_tn(const double A[9], const double B[9], double C[9]) {
+  MSGS_UNROLL
+  for (int i = 0; i < 3; ++i)
+    MSGS_UNROLL
+    for (int j = 0; j < 3; ++j) C[3 * i + j] = A[i] * B[j] + A[3 + i] * B[3 + j] + A[6 + i] * B[6 + j];
 }
 
 /// Intermediate values of the projection that the backward pass reuses.
 struct ProjectionCache {
-  Eigen::Vector4d qhat;      // normalised quaternion
+  double qhat[4];          // normalised quaternion
   double qnorm;
-  Eigen::Vector3d scale;     // exp(clamped log-scale)
-  Eigen::Vector3d scale_active;  // 1 where the log-scale was not clamped
-  Eigen::Matrix3d Rq;        // rotation of the Gaussian
-  Eigen::Matrix3d M;         // Rq * diag(scale)
-  Eigen::Matrix3d cov_cam;   // W Sigma W^T
-  Eigen::Vector3d tcam;      // camera-space mean
-  double lim_x_pos, lim_x_neg, lim_y_pos, lim_y_neg;
-  double txz, tyz;           // tx / tz, ty / tz before clamping
-  Eigen::Matrix<double, 2, 3> J;
-  Eigen::Matrix2d cov2d;     // before dilation
-  Eigen::Matrix2d cov2d_blur;// after dilation
+  double scale[3];         // exp(clamped log-scale)
+  double scale_active[3];  // 1 where the log-scale was not clamped
+  double Rq[9];            // rotation of the Gaussian (row-major)
+  double WM[9];            // W Rq diag(scale): Sigma_cam = WM WM^T
+  double tcam[3];          // camera-space mean
+  double inv_tz;           // 1 / tcam[2]
+  double txz, tyz;         // tx / tz, ty / tz before clamping
+  double J00, J02, J11, J12;  // EWA Jacobian [[J00, 0, J02], [0, J11, J12]]
+  double cov2d[3];         // before dilation: xx, xy, yy
+  double blur[3];          // after dilation
   double det_blur, det_orig;
-  double compensation;       // antialiasing factor (1 when disabled)
+  double compensation;     // antialiasing factor (1 when disabled)
   bool compensation_floored;
-  double sig;                // sigmoid(logit)
+  double sig;              // sigmoid(logit)
 };
 
 }  // namespace detail
@@ -122,79 +158,101 @@ inline bool project_fwd(const GaussianGeometry& g, const ProjectCamera& cam, Pro
                         detail::ProjectionCache* cache_out = nullptr) {
   using PC = ProjectConstants;
   out.visible = false;
-  if (!g.mean.allFinite() || !g.log_scale.allFinite() || !g.quat.allFinite() || !std::isfinite(g.opacity_logit))
-    return false;
+  const double mean[3] = {g.mean[0], g.mean[1], g.mean[2]};
+  const double ls[3] = {g.log_scale[0], g.log_scale[1], g.log_scale[2]};
+  const double quat[4] = {g.quat[0], g.quat[1], g.quat[2], g.quat[3]};
+  {
+    bool finite = std::isfinite(g.opacity_logit);
+    MSGS_UNROLL
+    for (int i = 0; i < 3; ++i) finite = finite && std::isfinite(mean[i]) && std::isfinite(ls[i]);
+    MSGS_UNROLL
+    for (int i = 0; i < 4; ++i) finite = finite && std::isfinite(quat[i]);
+    if (!finite) return false;
+  }
   detail::ProjectionCache c;
-  c.tcam = cam.R * g.mean + cam.t;
-  const double tz = c.tcam.z();
+  const double* W = cam.rot;
+  MSGS_UNROLL
+  for (int i = 0; i < 3; ++i)
+    c.tcam[i] = ((W[3 * i] * mean[0] + W[3 * i + 1] * mean[1]) + W[3 * i + 2] * mean[2]) + cam.trans[i];
+  const double tz = c.tcam[2];
   if (!(tz > cam.near_plane) || tz > cam.far_plane) return false;
 
-  c.qnorm = g.quat.norm();
+  c.qnorm = std::sqrt(quat[0] * quat[0] + quat[1] * quat[1] + quat[2] * quat[2] + quat[3] * quat[3]);
   if (!(c.qnorm >= PC::kMinQuatNorm)) return false;
-  c.qhat = g.quat / c.qnorm;
+  const double inv_qnorm = 1.0 / c.qnorm;  // divisions are the projection's slowest operations
+  MSGS_UNROLL
+  for (int i = 0; i < 4; ++i) c.qhat[i] = quat[i] * inv_qnorm;
 
   c.sig = detail::sigmoid(g.opacity_logit);
   if (!(c.sig >= PC::kMinAlpha)) return false;
 
-  // Tan-fov clamp limits (generalised for off-centre principal points).
-  const double tan_fovx = 0.5 * cam.width / cam.fx, tan_fovy = 0.5 * cam.height / cam.fy;
-  c.lim_x_pos = (cam.width - cam.cx) / cam.fx + PC::kFovClampMargin * tan_fovx;
-  c.lim_x_neg = cam.cx / cam.fx + PC::kFovClampMargin * tan_fovx;
-  c.lim_y_pos = (cam.height - cam.cy) / cam.fy + PC::kFovClampMargin * tan_fovy;
-  c.lim_y_neg = cam.cy / cam.fy + PC::kFovClampMargin * tan_fovy;
-  c.txz = c.tcam.x() / tz;
-  c.tyz = c.tcam.y() / tz;
-  const double txc = std::min(c.lim_x_pos, std::max(-c.lim_x_neg, c.txz));
-  const double tyc = std::min(c.lim_y_pos, std::max(-c.lim_y_neg, c.tyz));
+  c.inv_tz = 1.0 / tz;
+  c.txz = c.tcam[0] * c.inv_tz;
+  c.tyz = c.tcam[1] * c.inv_tz;
+  const double txc = std::min(cam.lim_x_pos, std::max(-cam.lim_x_neg, c.txz));
+  const double tyc = std::min(cam.lim_y_pos, std::max(-cam.lim_y_neg, c.tyz));
   const double mean_x = cam.fx * c.txz + cam.cx, mean_y = cam.fy * c.tyz + cam.cy;
 
   // Far off-screen? Most Gaussians of a large scene are outside any one view, so bound the screen
   // extent before building the covariance: cov2d(0,0) = j0^T cov_cam j0 <= s_max^2 |j0|^2 with
   // |j0|^2 = (fx/tz)^2 (1 + txc^2), and the antialiasing compensation only lowers the opacity.
-  // A Gaussian culled here is one the exact test below would cull too.
-  {
-    const double smax = std::exp(std::clamp(g.log_scale.maxCoeff(), -PC::kLogScaleClamp, PC::kLogScaleClamp));
-    const double kb = std::sqrt(std::max(0.0, 2.0 * std::log(c.sig / PC::kMinAlpha)));
-    const double sx = smax * cam.fx / tz, sy = smax * cam.fy / tz;
+  // A Gaussian culled here is one the exact test below would cull too, so the backward (which
+  // recomputes the projection of a Gaussian it knows to be visible, with cache_out set) skips it.
+  // Without antialiasing the opacity is sig, so kb is also the extent's factor below.
+  double kb = -1.0;
+  if (!cache_out) {
+    const double ls_max = std::max(ls[0], std::max(ls[1], ls[2]));
+    const double smax = std::exp(std::clamp(ls_max, -PC::kLogScaleClamp, PC::kLogScaleClamp));
+    kb = std::sqrt(std::max(0.0, 2.0 * std::log(c.sig / PC::kMinAlpha)));
+    const double sx = smax * cam.fx * c.inv_tz, sy = smax * cam.fy * c.inv_tz;
     const double bx = kb * std::sqrt(sx * sx * (1.0 + txc * txc) + PC::kDilation) * (1.0 + 1e-6) + 1e-6;
     const double by = kb * std::sqrt(sy * sy * (1.0 + tyc * tyc) + PC::kDilation) * (1.0 + 1e-6) + 1e-6;
     if (mean_x + bx < -1.0 || mean_x - bx > cam.width + 1.0 || mean_y + by < -1.0 || mean_y - by > cam.height + 1.0)
       return false;
   }
 
+  MSGS_UNROLL
   for (int i = 0; i < 3; ++i) {
-    const double ls = g.log_scale[i];
-    const double cl = std::clamp(ls, -PC::kLogScaleClamp, PC::kLogScaleClamp);
-    c.scale_active[i] = (ls == cl) ? 1.0 : 0.0;
+    const double cl = std::clamp(ls[i], -PC::kLogScaleClamp, PC::kLogScaleClamp);
+    c.scale_active[i] = (ls[i] == cl) ? 1.0 : 0.0;
     c.scale[i] = std::exp(cl);
   }
-  c.Rq = detail::quat_to_rotation(c.qhat);
-  c.M = c.Rq * c.scale.asDiagonal();
-  // cov_cam = W Sigma W^T = (W M)(W M)^T: one 3x3 product and a symmetric one instead of four.
-  const Eigen::Matrix3d WM = cam.R * c.M;
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j <= i; ++j) c.cov_cam(i, j) = c.cov_cam(j, i) = WM.row(i).dot(WM.row(j));
+  detail::quat_to_rotation(c.qhat, c.Rq);
+  // WM = W Rq diag(scale); cov_cam = W Sigma W^T = WM WM^T.
+  {
+    double M[9];
+    MSGS_UNROLL
+    for (int i = 0; i < 3; ++i)
+      MSGS_UNROLL
+      for (int j = 0; j < 3; ++j) M[3 * i + j] = c.Rq[3 * i + j] * c.scale[j];
+    detail::mul33(W, M, c.WM);
+  }
 
   // EWA Jacobian with the generalised tan-fov clamp.
-  const double tx = tz * txc;
-  const double ty = tz * tyc;
-  c.J << cam.fx / tz, 0, -cam.fx * tx / (tz * tz),
-         0, cam.fy / tz, -cam.fy * ty / (tz * tz);
-  // cov2d = J cov_cam J^T = (J W M)(J W M)^T, with J's zeros skipped; symmetric by construction.
-  const Eigen::RowVector3d T0 = c.J(0, 0) * WM.row(0) + c.J(0, 2) * WM.row(2);
-  const Eigen::RowVector3d T1 = c.J(1, 1) * WM.row(1) + c.J(1, 2) * WM.row(2);
-  c.cov2d(0, 0) = T0.dot(T0);
-  c.cov2d(1, 1) = T1.dot(T1);
-  c.cov2d(0, 1) = c.cov2d(1, 0) = T0.dot(T1);
-  c.cov2d_blur = c.cov2d;
-  c.cov2d_blur(0, 0) += PC::kDilation;
-  c.cov2d_blur(1, 1) += PC::kDilation;
-  c.det_blur = c.cov2d_blur(0, 0) * c.cov2d_blur(1, 1) - c.cov2d_blur(0, 1) * c.cov2d_blur(0, 1);
+  // J02 = -fx tx / tz^2 with tx = tz txc, i.e. -fx txc / tz.
+  c.J00 = cam.fx * c.inv_tz;
+  c.J02 = -c.J00 * txc;
+  c.J11 = cam.fy * c.inv_tz;
+  c.J12 = -c.J11 * tyc;
+  // cov2d = J cov_cam J^T = (J WM)(J WM)^T, with J's zeros skipped; symmetric by construction.
+  double T0[3], T1[3];
+  MSGS_UNROLL
+  for (int j = 0; j < 3; ++j) {
+    T0[j] = c.J00 * c.WM[j] + c.J02 * c.WM[6 + j];
+    T1[j] = c.J11 * c.WM[3 + j] + c.J12 * c.WM[6 + j];
+  }
+  c.cov2d[0] = T0[0] * T0[0] + T0[1] * T0[1] + T0[2] * T0[2];
+  c.cov2d[1] = T0[0] * T1[0] + T0[1] * T1[1] + T0[2] * T1[2];
+  c.cov2d[2] = T1[0] * T1[0] + T1[1] * T1[1] + T1[2] * T1[2];
+  c.blur[0] = c.cov2d[0] + PC::kDilation;
+  c.blur[1] = c.cov2d[1];
+  c.blur[2] = c.cov2d[2] + PC::kDilation;
+  c.det_blur = c.blur[0] * c.blur[2] - c.blur[1] * c.blur[1];
   if (!(c.det_blur > 0) || !std::isfinite(c.det_blur)) return false;
 
   c.compensation = 1.0;
   c.compensation_floored = false;
-  c.det_orig = c.cov2d(0, 0) * c.cov2d(1, 1) - c.cov2d(0, 1) * c.cov2d(0, 1);
+  c.det_orig = c.cov2d[0] * c.cov2d[2] - c.cov2d[1] * c.cov2d[1];
   if constexpr (Antialiased) {
     const double comp = std::sqrt(std::max(0.0, c.det_orig / c.det_blur));
     c.compensation_floored = !(comp > PC::kMinCompensation);
@@ -205,17 +263,17 @@ inline bool project_fwd(const GaussianGeometry& g, const ProjectCamera& cam, Pro
 
   out.mean2d[0] = mean_x;
   out.mean2d[1] = mean_y;
-  out.conic[0] = c.cov2d_blur(1, 1) / c.det_blur;
-  out.conic[1] = -c.cov2d_blur(0, 1) / c.det_blur;
-  out.conic[2] = c.cov2d_blur(0, 0) / c.det_blur;
+  const double inv_det = 1.0 / c.det_blur;
+  out.conic[0] = c.blur[2] * inv_det;
+  out.conic[1] = -c.blur[1] * inv_det;
+  out.conic[2] = c.blur[0] * inv_det;
   out.depth = tz;
   out.opacity = opacity;
   // alpha >= 1/255  <=>  sigma <= ln(255 o): the exact support, no 3-sigma cut-off, so the tiled
   // renderer paints exactly what a per-pixel loop over all Gaussians would.
-  const double k2 = 2.0 * std::log(opacity / PC::kMinAlpha);
-  const double k = std::sqrt(std::max(0.0, k2));
-  out.extent[0] = k * std::sqrt(c.cov2d_blur(0, 0));
-  out.extent[1] = k * std::sqrt(c.cov2d_blur(1, 1));
+  const double k = (!Antialiased && kb >= 0.0) ? kb : std::sqrt(std::max(0.0, 2.0 * std::log(opacity / PC::kMinAlpha)));
+  out.extent[0] = k * std::sqrt(c.blur[0]);
+  out.extent[1] = k * std::sqrt(c.blur[2]);
   if (!std::isfinite(out.mean2d[0]) || !std::isfinite(out.mean2d[1]) || !std::isfinite(out.extent[0]) ||
       !std::isfinite(out.extent[1]))
     return false;
@@ -252,73 +310,104 @@ inline void project_bwd(const GaussianGeometry& g, const ProjectCamera& cam, con
   ProjectedGaussian out;
   detail::ProjectionCache c;
   if (!project_fwd<Antialiased>(g, cam, out, &c)) return;
-  const double tz = c.tcam.z();
+  const double* W = cam.rot;
 
   // Opacity: o = sigmoid(logit) * compensation.
   grad.opacity_logit += v.opacity * c.compensation * c.sig * (1.0 - c.sig);
 
-  // Conic = inverse(cov2d_blur): dL/dCov = -Q^T dL/dQ Q^T with Q symmetric; b appears twice in Q.
-  Eigen::Matrix2d Q;
-  Q << out.conic[0], out.conic[1], out.conic[1], out.conic[2];
-  Eigen::Matrix2d vQ;
-  vQ << v.conic[0], 0.5 * v.conic[1], 0.5 * v.conic[1], v.conic[2];
-  Eigen::Matrix2d v_cov = -(Q * vQ * Q);  // gradient w.r.t. cov2d_blur (full symmetric matrix)
+  // Conic Q = inverse(cov2d_blur): dL/dCov = -Q dL/dQ Q with Q symmetric; b appears twice in Q,
+  // so dL/dQ has b's gradient halved off the diagonal. G = v_cov is the gradient w.r.t.
+  // cov2d_blur as a full 2x2 matrix [[G00, G01], [G10, G11]].
+  const double qa = out.conic[0], qb = out.conic[1], qc = out.conic[2];
+  const double va = v.conic[0], vb = 0.5 * v.conic[1], vc = v.conic[2];
+  const double P00 = qa * va + qb * vb, P01 = qa * vb + qb * vc, P10 = qb * va + qc * vb, P11 = qb * vb + qc * vc;
+  double G00 = -(P00 * qa + P01 * qb), G01 = -(P00 * qb + P01 * qc);
+  double G10 = -(P10 * qa + P11 * qb), G11 = -(P10 * qb + P11 * qc);
 
   if constexpr (Antialiased) {
     if (!c.compensation_floored) {
-      // compensation = sqrt(det_orig / det_blur); d det(A)/dA = det(A) A^{-T}.
+      // compensation = sqrt(det_orig / det_blur); d det(A)/dA = det(A) A^{-T} = adj(A)^T.
       const double v_comp = v.opacity * c.sig;
       const double r = c.det_orig / c.det_blur;
       const double v_r = v_comp * 0.5 / std::sqrt(r);
-      Eigen::Matrix2d adj_orig, adj_blur;
-      adj_orig << c.cov2d(1, 1), -c.cov2d(0, 1), -c.cov2d(0, 1), c.cov2d(0, 0);
-      adj_blur << c.cov2d_blur(1, 1), -c.cov2d_blur(0, 1), -c.cov2d_blur(0, 1), c.cov2d_blur(0, 0);
       // r depends on cov2d through both determinants (cov2d_blur = cov2d + 0.3 I).
-      v_cov += v_r * (adj_orig / c.det_blur - c.det_orig / (c.det_blur * c.det_blur) * adj_blur);
+      const double k_orig = v_r / c.det_blur, k_blur = v_r * c.det_orig / (c.det_blur * c.det_blur);
+      G00 += k_orig * c.cov2d[2] - k_blur * c.blur[2];
+      G11 += k_orig * c.cov2d[0] - k_blur * c.blur[0];
+      G01 += -k_orig * c.cov2d[1] + k_blur * c.blur[1];
+      G10 += -k_orig * c.cov2d[1] + k_blur * c.blur[1];
     }
   }
 
-  // cov2d = J C J^T  ->  dL/dC = J^T G J, dL/dJ = 2 G J C (G, C symmetric).
-  const Eigen::Matrix3d v_cov_cam = c.J.transpose() * v_cov * c.J;
-  const Eigen::Matrix<double, 2, 3> v_J = 2.0 * v_cov * c.J * c.cov_cam;
+  // cov2d = J C J^T with C = WM WM^T  ->  dL/dC = J^T G J, dL/dJ = 2 G J C (G, C symmetric).
+  // GJ = G J (2x3), J = [[J00, 0, J02], [0, J11, J12]].
+  const double GJ[2][3] = {{G00 * c.J00, G01 * c.J11, G00 * c.J02 + G01 * c.J12},
+                           {G10 * c.J00, G11 * c.J11, G10 * c.J02 + G11 * c.J12}};
+  // v_cov_cam = J^T GJ (3x3, row-major).
+  const double Jcol[3][2] = {{c.J00, 0.0}, {0.0, c.J11}, {c.J02, c.J12}};  // column i of J
+  double v_cc[9];
+  MSGS_UNROLL
+  for (int i = 0; i < 3; ++i)
+    MSGS_UNROLL
+    for (int j = 0; j < 3; ++j) v_cc[3 * i + j] = Jcol[i][0] * GJ[0][j] + Jcol[i][1] * GJ[1][j];
+  // C = WM WM^T; v_J = 2 GJ C, needed at (0,0), (0,2), (1,1), (1,2).
+  double C[9];
+  MSGS_UNROLL
+  for (int i = 0; i < 3; ++i)
+    MSGS_UNROLL
+    for (int j = 0; j < 3; ++j)
+      C[3 * i + j] = c.WM[3 * i] * c.WM[3 * j] + c.WM[3 * i + 1] * c.WM[3 * j + 1] + c.WM[3 * i + 2] * c.WM[3 * j + 2];
+  auto v_J = [&](int a, int j) { return 2.0 * (GJ[a][0] * C[j] + GJ[a][1] * C[3 + j] + GJ[a][2] * C[6 + j]); };
+  const double vJ00 = v_J(0, 0), vJ02 = v_J(0, 2), vJ11 = v_J(1, 1), vJ12 = v_J(1, 2);
 
   // J entries -> camera-space mean (clamped components only depend on tz).
-  Eigen::Vector3d v_t = Eigen::Vector3d::Zero();
-  const double tz2 = tz * tz, tz3 = tz2 * tz;
-  v_t.z() += -cam.fx / tz2 * v_J(0, 0) - cam.fy / tz2 * v_J(1, 1);
-  const bool x_clamped = c.txz > c.lim_x_pos || c.txz < -c.lim_x_neg;
-  const bool y_clamped = c.tyz > c.lim_y_pos || c.tyz < -c.lim_y_neg;
+  double v_t[3] = {0, 0, 0};
+  const double iz = c.inv_tz, iz2 = iz * iz, iz3 = iz2 * iz;
+  v_t[2] += -cam.fx * iz2 * vJ00 - cam.fy * iz2 * vJ11;
+  const bool x_clamped = c.txz > cam.lim_x_pos || c.txz < -cam.lim_x_neg;
+  const bool y_clamped = c.tyz > cam.lim_y_pos || c.tyz < -cam.lim_y_neg;
   if (x_clamped) {
-    const double L = std::min(c.lim_x_pos, std::max(-c.lim_x_neg, c.txz));
-    v_t.z() += cam.fx * L / tz2 * v_J(0, 2);  // J02 = -fx L / tz
+    const double L = std::min(cam.lim_x_pos, std::max(-cam.lim_x_neg, c.txz));
+    v_t[2] += cam.fx * L * iz2 * vJ02;  // J02 = -fx L / tz
   } else {
-    v_t.x() += -cam.fx / tz2 * v_J(0, 2);
-    v_t.z() += 2.0 * cam.fx * c.tcam.x() / tz3 * v_J(0, 2);
+    v_t[0] += -cam.fx * iz2 * vJ02;
+    v_t[2] += 2.0 * cam.fx * c.tcam[0] * iz3 * vJ02;
   }
   if (y_clamped) {
-    const double L = std::min(c.lim_y_pos, std::max(-c.lim_y_neg, c.tyz));
-    v_t.z() += cam.fy * L / tz2 * v_J(1, 2);
+    const double L = std::min(cam.lim_y_pos, std::max(-cam.lim_y_neg, c.tyz));
+    v_t[2] += cam.fy * L * iz2 * vJ12;
   } else {
-    v_t.y() += -cam.fy / tz2 * v_J(1, 2);
-    v_t.z() += 2.0 * cam.fy * c.tcam.y() / tz3 * v_J(1, 2);
+    v_t[1] += -cam.fy * iz2 * vJ12;
+    v_t[2] += 2.0 * cam.fy * c.tcam[1] * iz3 * vJ12;
   }
   // Projected mean (unclamped).
-  v_t.x() += cam.fx / tz * v.mean2d[0];
-  v_t.y() += cam.fy / tz * v.mean2d[1];
-  v_t.z() += -cam.fx * c.tcam.x() / tz2 * v.mean2d[0] - cam.fy * c.tcam.y() / tz2 * v.mean2d[1];
-  v_t.z() += v.depth;
-  grad.mean += cam.R.transpose() * v_t;
+  v_t[0] += cam.fx * iz * v.mean2d[0];
+  v_t[1] += cam.fy * iz * v.mean2d[1];
+  v_t[2] += -cam.fx * c.tcam[0] * iz2 * v.mean2d[0] - cam.fy * c.tcam[1] * iz2 * v.mean2d[1];
+  v_t[2] += v.depth;
+  MSGS_UNROLL
+  for (int i = 0; i < 3; ++i) grad.mean[i] += W[i] * v_t[0] + W[3 + i] * v_t[1] + W[6 + i] * v_t[2];
 
-  // cov_cam = W Sigma W^T; Sigma = M M^T with M = Rq diag(s).
-  const Eigen::Matrix3d v_sigma = cam.R.transpose() * v_cov_cam * cam.R;
-  const Eigen::Matrix3d v_M = 2.0 * v_sigma * c.M;
+  // cov_cam = W Sigma W^T; Sigma = M M^T with M = Rq diag(s):
+  // dL/dM = 2 W^T v_cc W M = 2 W^T (v_cc WM).
+  double X[9], v_M[9];
+  detail::mul33(v_cc, c.WM, X);
+  detail::mul33_tn(W, X, v_M);
+  for (double& e : v_M) e *= 2.0;
+  double v_Rq[9];
+  MSGS_UNROLL
   for (int j = 0; j < 3; ++j) {
-    const double v_s = c.Rq.col(j).dot(v_M.col(j));
+    const double v_s = c.Rq[j] * v_M[j] + c.Rq[3 + j] * v_M[3 + j] + c.Rq[6 + j] * v_M[6 + j];
     grad.log_scale[j] += v_s * c.scale[j] * c.scale_active[j];
+    MSGS_UNROLL
+    for (int i = 0; i < 3; ++i) v_Rq[3 * i + j] = v_M[3 * i + j] * c.scale[j];
   }
-  const Eigen::Matrix3d v_Rq = v_M * c.scale.asDiagonal();
-  const Eigen::Vector4d v_qhat = detail::quat_to_rotation_backward(c.qhat, v_Rq);
-  grad.quat += (v_qhat - c.qhat * c.qhat.dot(v_qhat)) / c.qnorm;
+  double v_qhat[4];
+  detail::quat_to_rotation_backward(c.qhat, v_Rq, v_qhat);
+  const double qdot = c.qhat[0] * v_qhat[0] + c.qhat[1] * v_qhat[1] + c.qhat[2] * v_qhat[2] + c.qhat[3] * v_qhat[3];
+  const double inv_qnorm = 1.0 / c.qnorm;
+  MSGS_UNROLL
+  for (int i = 0; i < 4; ++i) grad.quat[i] += (v_qhat[i] - c.qhat[i] * qdot) * inv_qnorm;
 }
 
 /// Colour of one Gaussian for channels [first, first + count): SH (degree `deg`) evaluated along
