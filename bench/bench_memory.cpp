@@ -101,14 +101,14 @@ void BM_TrainStepMemory(benchmark::State& state) {
   k["d_adam_step_MiB"] = rss_step;
   // Expected sizes from element counts.
   k["model_MiB"] = model_mib<G>(model.size());
-  k["grads_MiB"] = model_mib<G>(model.size()) + N * 4 * sizeof(float) / kMiB;  // + mean2d, absgrad [N, 2]
+  k["grads_MiB"] = model_mib<G>(model.size()) + N * 2 * sizeof(float) / kMiB;  // + mean2d [N, 2] (absgrad off)
   k["adam_moments_MiB"] = 2 * model_mib<G>(model.size());
   k["raster_per_gaussian_MiB"] =
       N * double(sizeof(Splat<float>) + count * sizeof(float) + sizeof(float) + sizeof(PixelRect) + 2 * sizeof(std::int32_t) + 1) / kMiB +
       V * (4 + 4 + 8) / kMiB;  // visible ids, depth order, pair offsets
   k["raster_per_intersection_MiB"] =
-      M * double(sizeof(std::uint32_t) + sizeof(std::uint64_t) + sizeof(std::uint32_t)) / kMiB;  // tile_list, pair_slot, chunk_mask
-  k["grad_records_MiB"] = M * double(BlendRecord::size(count)) * sizeof(float) / kMiB;
+      M * double(sizeof(std::uint32_t) + sizeof(std::uint64_t) + sizeof(std::uint16_t)) / kMiB;  // tile_list, pair_slot, row_mask
+  k["grad_records_MiB"] = M * double(BlendRecord<false, false>::size(count)) * sizeof(float) / kMiB;
   k["images_MiB"] = double(spec.width) * spec.height * (3 * count + 3) * sizeof(float) / kMiB;  // render, gt, d_image, alpha, T, last
   k["intersections"] = M;
   k["visible"] = V;

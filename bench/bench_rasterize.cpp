@@ -81,13 +81,13 @@ void bm_forward(benchmark::State& st, int size, int threads, RenderSettings<floa
   st.counters["visible"] = double(r.visible_count());
 }
 
-template <class G>
+template <class G, RasterOptions Opt = RasterOptions{}>
 void bm_backward(benchmark::State& st, int size, int threads, RenderSettings<float> rs) {
   omp_set_num_threads(threads);
   const SceneSpec spec = spec_of(size);
   const GaussianModel<G, float>& m = model_for<G>(size);
   const Camera<float> cam = bench::family_camera<float>(spec);
-  Rasterizer<G, float> r;
+  Rasterizer<G, float, Opt> r;
   r.forward(m, cam, rs);
   const Image<float> d_image = bench::family_image_grad<float>(spec, r.image().channels);
   Gradients<G, float> grads;
@@ -169,6 +169,12 @@ int main(int argc, char** argv) {
       one_band.band_first = 3;
       one_band.band_count = 1;
       register_type<Gaussian<7, 3>>("B7_SH3_band3only", size, threads, one_band);
+      // What absgrad (opt-in; training turns it on for densification) adds to the backward.
+      constexpr RasterOptions kAbsGrad{.absgrad = true};
+      tune(benchmark::RegisterBenchmark(
+               (std::string("backward/B3_SH0_absgrad/") + kSizes[size].name + "/threads:" + std::to_string(threads)).c_str(),
+               [=](benchmark::State& st) { bm_backward<Gaussian<3, 0>, kAbsGrad>(st, size, threads, {}); }),
+           size);
     }
   }
   benchmark::Initialize(&argc, argv);

@@ -17,7 +17,7 @@ using namespace msgs::testing;
 
 namespace {
 
-constexpr RasterOptions kDepthAA{.depth = true, .antialiased = true};
+constexpr RasterOptions kDepthAA{.depth = true, .antialiased = true, .absgrad = true};
 using G = Gaussian<7, 3>;
 using R = Rasterizer<G, float, kDepthAA>;
 
@@ -42,7 +42,8 @@ Image<float> weights(int w, int h, int c, std::uint64_t seed) {
   return img;
 }
 
-Run run(R& r, const GaussianModel<G, float>& m, const Camera<float>& cam, const RenderSettings<float>& rs, int threads) {
+template <class Raster>
+Run run(Raster& r, const GaussianModel<G, float>& m, const Camera<float>& cam, const RenderSettings<float>& rs, int threads) {
   omp_set_num_threads(threads);
   Run out;
   r.forward(m, cam, rs);
@@ -58,7 +59,7 @@ Run run(R& r, const GaussianModel<G, float>& m, const Camera<float>& cam, const 
   return out;
 }
 
-void check_same(const Run& a, const Run& b) {
+void check_same(const Run& a, const Run& b, bool with_absgrad = true) {
   CHECK(bitwise_equal(a.image, b.image));
   CHECK(bitwise_equal(a.alpha, b.alpha));
   CHECK(bitwise_equal(a.depth, b.depth));
@@ -70,7 +71,7 @@ void check_same(const Run& a, const Run& b) {
   CHECK(bitwise_equal(a.grads.model.opacity_logits, b.grads.model.opacity_logits));
   CHECK(bitwise_equal(a.grads.model.sh, b.grads.model.sh));
   CHECK(bitwise_equal(a.grads.mean2d, b.grads.mean2d));
-  CHECK(bitwise_equal(a.grads.absgrad, b.grads.absgrad));
+  if (with_absgrad) CHECK(bitwise_equal(a.grads.absgrad, b.grads.absgrad));
   CHECK(bitwise_equal(a.grads.background, b.grads.background));
 }
 
@@ -103,4 +104,24 @@ TEST_CASE("rasterizer is bitwise deterministic across thread counts and repeated
     check_same(one, run(shared, m, cam, rs, 2));
   }
   omp_set_num_threads(saved);
+}
+
+TEST_CASE("absgrad off changes nothing but Gradients::absgrad (left empty)") {
+  const Camera<float> cam = test_camera<float>(96, 80, 50.0, 48.0, 40.0);
+  SceneParams sp;
+  sp.n = 1500;
+  sp.log_scale_min = std::log(0.01);
+  sp.log_scale_max = std::log(0.15);
+  const GaussianModel<G, float> m = random_scene<G, float>(cam, sp, 78);
+  constexpr RasterOptions kNoAbs{.depth = true, .antialiased = true, .absgrad = false};
+  Rasterizer<G, float, kNoAbs> off;
+  R on;
+  RenderSettings<float> rs;
+  rs.band_first = 2;
+  rs.band_count = 3;
+  const Run a = run(on, m, cam, rs, 2), b = run(off, m, cam, rs, 2);
+  REQUIRE(a.fragments > 1000);
+  CHECK(a.grads.absgrad.size() == 2 * m.size());
+  CHECK(b.grads.absgrad.empty());
+  check_same(a, b, false);
 }

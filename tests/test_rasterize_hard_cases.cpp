@@ -17,7 +17,7 @@ using namespace msgs::testing;
 
 namespace {
 
-constexpr RasterOptions kDepth{.depth = true, .antialiased = false};
+constexpr RasterOptions kDepth{.depth = true, .antialiased = false, .absgrad = true};
 
 template <class S>
 Image<S> weights(int w, int h, int c, std::uint64_t seed) {

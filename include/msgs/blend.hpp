@@ -86,7 +86,7 @@ template <class S>
 inline void alpha_from_sigma(RowAlpha<S>& out, S opacity, const typename RowVec<S>::V& max_alpha) {
   exp_neg_into(out.e, out.sigma);
   out.falloff = opacity * out.e;
-  out.alpha = out.falloff < max_alpha ? out.falloff : max_alpha;
+  min_into(out.alpha, out.falloff, max_alpha);  // falloff < 0.99 ? falloff : 0.99
 }
 
 template <class S>
@@ -128,11 +128,18 @@ struct BlendGradInputs {
   const S* d_depth = nullptr;  // [H, W] or nullptr
 };
 
-/// Layout of the per-intersection gradient record written by the backward.
+/// Layout of the per-intersection gradient record written by the backward: the mean, conic and
+/// opacity gradients, the `count` channel gradients, then a depth slot only with depth and two
+/// absgrad slots only with absgrad, so that features that are off cost no memory traffic.
+template <bool Depth, bool AbsGrad>
 struct BlendRecord {
-  enum : int { kMeanX = 0, kMeanY, kConicA, kConicB, kConicC, kOpacity, kAbsX, kAbsY, kDepth, kBase };
-  /// Record length for `count` channels (depth slot always present, zero without depth).
-  static int size(int count) { return kBase + count; }
+  enum : int { kMeanX = 0, kMeanY, kConicA, kConicB, kConicC, kOpacity, kBase };
+  /// Record length for `count` channels.
+  static constexpr int size(int count) { return kBase + count + (Depth ? 1 : 0) + (AbsGrad ? 2 : 0); }
+  /// Slot of dL/d(depth) (with Depth).
+  static constexpr int depth(int count) { return kBase + count; }
+  /// Slots of the absgrad x and y sums (with AbsGrad): abs_x(count) and abs_x(count) + 1.
+  static constexpr int abs_x(int count) { return kBase + count + (Depth ? 1 : 0); }
 };
 
 namespace detail {
@@ -283,11 +290,11 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
 
 /// Backward of blend_tile_fwd for one tile: walks the tile's list back to front, rebuilding each
 /// pixel's transmittance by division (alpha <= 0.99 keeps it well conditioned), and writes one
-/// gradient record per intersection into `records` ([M, BlendRecord::size(count)]) for every
+/// gradient record per intersection into `records` ([M, BlendRecord<Depth, AbsGrad>::size(count)]) for every
 /// intersection whose row mask is non-zero; the others are left unwritten (their gradient is zero). Adds the
 /// tile's background gradient into `d_background` ([count]). Alpha is evaluated by the same
 /// expressions as in the forward, so both make the same fragment decisions.
-template <class S, int C, int MaxC, bool Depth>
+template <class S, int C, int MaxC, bool Depth, bool AbsGrad>
 inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmittance, const std::uint32_t* last_in,
                            const std::uint16_t* row_mask, const BlendGradInputs<S>& gin, S* records, S* d_background) {
   constexpr int TS = TileGrid::kTileSize;
@@ -300,7 +307,8 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
   using U = typename RV::U;
   constexpr int NH = RV::kChunks, L = RV::kLanes, Q = TS * NH;
   const int nc = C > 0 ? C : in.count;
-  const int R = BlendRecord::size(nc);
+  using Rec = BlendRecord<Depth, AbsGrad>;
+  const int R = Rec::size(nc);
   const detail::TileBounds<S> tb(*in.grid, tile);
   const std::uint64_t begin = in.bins->tile_offset[std::size_t(tile)], end = in.bins->tile_offset[std::size_t(tile) + 1];
 
@@ -346,11 +354,15 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
   for (int ch = 0; ch < nc; ++ch) d_background[ch] += bg_grad[ch];
   if (begin == end) return;  // an empty tile still passes its background gradient (T = 1)
 
-  // Lane accumulators, summed over the splat's pixels: with v = dL/dsigma per pixel,
-  // P = sum v dx, Q = sum v dy, AA = sum v dx^2, BB = sum v dx dy, CC = sum v dy^2 give the conic and
-  // mean gradients after the horizontal sum; the others map to record slots directly.
-  enum : int { kP = 0, kQ, kAA, kBB, kCC, kOp, kAbsX, kAbsY, kDep, kCol };
-  constexpr int NL = kCol + NC;
+  // Lane accumulators of one splat, summed over the rows it blended into. With u = -dL/dsigma per
+  // pixel (zero where the alpha clamp holds), dL/dsigma enters the conic and mean gradients through
+  // sums of u dx^i dy^j; dx is fixed per lane, dy per row, so the rows accumulate only
+  // U0 = sum u, U1 = sum u dy and U2 = sum u dy^2 per lane, and the dx factors are applied once per
+  // splat (kU0x = U0 dx, kU0xx = U0 dx^2, kU1x = U1 dx) before the horizontal sums. Since
+  // falloff = o e, the opacity gradient sum dL/dalpha e = sum(U0) / o needs no accumulator of its own.
+  enum : int { kU0 = 0, kU0x, kU0xx, kU1, kU1x, kU2, kCol };
+  constexpr int kDep = kCol + NC, kAbsX = kDep + (Depth ? 1 : 0), kAbsY = kAbsX + 1;
+  constexpr int NL = kAbsX + (AbsGrad ? 2 : 0);  // only the accumulators this instantiation uses
   const std::uint32_t* list = in.bins->tile_list.data();
   for (std::uint64_t jr = begin + max_last; jr-- > begin;) {
     if (jr >= begin + kPrefetchDistance) {
@@ -374,14 +386,16 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
     V lane[NL * NH];  // [accumulator][chunk]
     for (int l = 0; l < NL * NH; ++l) lane[l] = zero;
     const detail::SplatRowTerms<S> terms(s, px);
-    V a_dx[NH];
-    for (int h = 0; h < NH; ++h) a_dx[h] = s.a * terms.dx[h];
+    [[maybe_unused]] V a_dx[NH];
+    if constexpr (AbsGrad)
+      for (int h = 0; h < NH; ++h) a_dx[h] = s.a * terms.dx[h];
     // Only the rows where the forward blended this splat (its row mask) can carry gradient.
     for (std::uint32_t rows = row_mask[jr]; rows != 0; rows &= rows - 1) {
       const int r = std::countr_zero(rows);
       const S dy = S(tb.y0 + r) + S(0.5) - s.my;
-      V dyv;
+      V dyv, dy2v;
       detail::broadcast(dyv, dy);
+      detail::broadcast(dy2v, dy * dy);
       // acc = ok ? acc + a b : acc, one masked FMA with AVX-512.
       const auto add_if = [](V& acc, const M& ok, const V& a, const V& b) {
         V t;
@@ -392,7 +406,7 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
         const int q = r * NH + h;
         detail::RowAlpha<S> f;
         detail::alpha_into(f, terms, s.o, dy, h, max_alpha);
-        const V alpha = f.alpha, falloff = f.falloff, e = f.e;
+        const V alpha = f.alpha, falloff = f.falloff;
         const M ok = __builtin_convertvector(k < last[q], M) & (f.sigma >= zero) & (alpha >= min_alpha);
         const V ra = one / (one - alpha);
         const V Ti = ok ? T[q] * ra : T[q];
@@ -402,41 +416,46 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
         if constexpr (Depth) detail::fmadd_into(cd, z, dD[q], cd);
         V v_alpha;
         detail::fmadd_into(v_alpha, Ti, cd, ra * (t_final_terms[q] - B[q]));
-        v_alpha = ok ? v_alpha : zero;
         add_if(B[q], ok, fac, cd);
         for (int ch = 0; ch < NC; ++ch) add_if(lane[(kCol + ch) * NH + h], ok, fac, dimg[ch][q]);
         if constexpr (Depth) add_if(lane[kDep * NH + h], ok, fac, dD[q]);
-        // alpha = min(0.99, o e^-sigma): no gradient through the clamp.
-        const M free = falloff < max_alpha;
-        const V v_sigma = free ? -v_alpha * falloff : zero;
-        add_if(lane[kOp * NH + h], free, v_alpha, e);
-        const V v_dx = v_sigma * terms.dx[h], v_dy = v_sigma * dy;
-        lane[kP * NH + h] += v_dx;
-        lane[kQ * NH + h] += v_dy;
-        detail::fmadd_into(lane[kAA * NH + h], v_dx, terms.dx[h], lane[kAA * NH + h]);
-        detail::fmadd_into(lane[kBB * NH + h], v_dx, dyv, lane[kBB * NH + h]);
-        detail::fmadd_into(lane[kCC * NH + h], v_dy, dyv, lane[kCC * NH + h]);
-        V gx = v_sigma * (a_dx[h] + s.b * dy), gy = v_sigma * (terms.b_dx[h] + s.c * dy);  // -dL/dmean per pixel
-        detail::abs_into(gx, gx);
-        detail::abs_into(gy, gy);
-        lane[kAbsX * NH + h] += gx;
-        lane[kAbsY * NH + h] += gy;
+        // alpha = min(0.99, o e^-sigma): no gradient through the clamp. u = -dL/dsigma.
+        const M free = ok & (falloff < max_alpha);
+        const V u = free ? v_alpha * falloff : zero;
+        lane[kU0 * NH + h] += u;
+        detail::fmadd_into(lane[kU1 * NH + h], u, dyv, lane[kU1 * NH + h]);
+        detail::fmadd_into(lane[kU2 * NH + h], u, dy2v, lane[kU2 * NH + h]);
+        if constexpr (AbsGrad) {
+          V gx = u * (a_dx[h] + s.b * dy), gy = u * (terms.b_dx[h] + s.c * dy);  // +-dL/dmean per pixel
+          detail::abs_into(gx, gx);
+          detail::abs_into(gy, gy);
+          lane[kAbsX * NH + h] += gx;
+          lane[kAbsY * NH + h] += gy;
+        }
         T[q] = Ti;
       }
+    }
+    for (int h = 0; h < NH; ++h) {
+      lane[kU0x * NH + h] = lane[kU0 * NH + h] * terms.dx[h];
+      lane[kU0xx * NH + h] = lane[kU0x * NH + h] * terms.dx[h];
+      lane[kU1x * NH + h] = lane[kU1 * NH + h] * terms.dx[h];
     }
     S sum[NL];
     detail::sum_rows(lane, NL, sum);
     S* rec = records + jr * std::uint64_t(R);
-    rec[BlendRecord::kMeanX] = -(s.a * sum[kP] + s.b * sum[kQ]);
-    rec[BlendRecord::kMeanY] = -(s.b * sum[kP] + s.c * sum[kQ]);
-    rec[BlendRecord::kConicA] = S(0.5) * sum[kAA];
-    rec[BlendRecord::kConicB] = sum[kBB];
-    rec[BlendRecord::kConicC] = S(0.5) * sum[kCC];
-    rec[BlendRecord::kOpacity] = sum[kOp];
-    rec[BlendRecord::kAbsX] = sum[kAbsX];
-    rec[BlendRecord::kAbsY] = sum[kAbsY];
-    rec[BlendRecord::kDepth] = Depth ? sum[kDep] : S(0);
-    for (int ch = 0; ch < nc; ++ch) rec[BlendRecord::kBase + ch] = sum[kCol + ch];
+    // dL/dsigma = -u: dL/dmean = -(conic (sum v dx, sum v dy)) with v = dL/dsigma, and so on.
+    rec[Rec::kMeanX] = s.a * sum[kU0x] + s.b * sum[kU1];
+    rec[Rec::kMeanY] = s.b * sum[kU0x] + s.c * sum[kU1];
+    rec[Rec::kConicA] = S(-0.5) * sum[kU0xx];
+    rec[Rec::kConicB] = -sum[kU1x];
+    rec[Rec::kConicC] = S(-0.5) * sum[kU2];
+    rec[Rec::kOpacity] = sum[kU0] / s.o;
+    for (int ch = 0; ch < nc; ++ch) rec[Rec::kBase + ch] = sum[kCol + ch];
+    if constexpr (Depth) rec[Rec::depth(nc)] = sum[kDep];
+    if constexpr (AbsGrad) {
+      rec[Rec::abs_x(nc)] = sum[kAbsX];
+      rec[Rec::abs_x(nc) + 1] = sum[kAbsY];
+    }
   }
   // Splats behind every pixel's last blended one have row mask 0 (see blend_tile_fwd): their
   // records are not written either.

@@ -535,6 +535,9 @@ class DensityControl {
   template <class Grads>
   void observe_gradients(long long step, int band, const Grads& grads, const std::vector<std::int32_t>& radii, int width,
                          int height) {
+    if (cfg_.absgrad && grads.absgrad.size() != grads.mean2d.size())
+      throw std::invalid_argument("DensityControl::observe_gradients: absgrad densification needs "
+                                  "Gradients::absgrad, which is empty; render with RasterOptions{.absgrad = true}");
     observe(step, band, cfg_.absgrad ? grads.absgrad : grads.mean2d, radii, width, height);
   }
 

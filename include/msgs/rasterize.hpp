@@ -20,11 +20,15 @@
 
 namespace msgs {
 
-/// Compile-time rasteriser features. `depth`: also output the accumulated depth sum_i w_i z_i.
-/// `antialiased`: gsplat's antialiased mode (opacity times sqrt(det cov2d / det(cov2d + 0.3 I))).
+/// Compile-time rasteriser features; each costs nothing when off. `depth`: also output the
+/// accumulated depth sum_i w_i z_i. `antialiased`: gsplat's antialiased mode (opacity times
+/// sqrt(det cov2d / det(cov2d + 0.3 I))). `absgrad`: the backward also fills Gradients::absgrad
+/// (sum over pixels of |per-pixel dL/dmean2d|, what absgrad densification reads; as in gsplat it
+/// is opt-in: about 10% of the blend backward).
 struct RasterOptions {
   bool depth = false;
   bool antialiased = false;
+  bool absgrad = false;
 };
 
 /// Wall-clock seconds spent in each stage, accumulated over calls (reset with `reset()`).
@@ -47,7 +51,8 @@ template <class G, class S>
 struct Gradients {
   GaussianModel<G, S> model;  ///< dL/d parameters; SH of channels outside the rendered range untouched
   std::vector<S> mean2d;      ///< [N, 2] dL/d(projected mean, pixels)
-  std::vector<S> absgrad;     ///< [N, 2] sum over pixels of |per-pixel dL/d(mean2d)|, per component
+  std::vector<S> absgrad;     ///< [N, 2] sum over pixels of |per-pixel dL/d(mean2d)|, per component; empty
+                              ///< unless RasterOptions::absgrad
   std::vector<S> background;  ///< [band_count] dL/d(background) per channel (sum them for a broadcast value)
 };
 
@@ -98,7 +103,8 @@ class Rasterizer {
     zero_grads(grads);
 
     // Blend backward: one gradient record per intersection, per-tile background partials.
-    const int R = BlendRecord::size(count_);
+    using Rec = BlendRecord<Opt.depth, Opt.absgrad>;
+    const int R = Rec::size(count_);
     records_.resize(bins_.pairs() * std::uint64_t(R));
     bg_partial_.assign(std::size_t(grid_.count()) * std::size_t(count_), S(0));
     BlendGradInputs<S> gin;
@@ -110,7 +116,7 @@ class Rasterizer {
       const int tiles = grid_.count();
 #pragma omp parallel for schedule(dynamic, 2)
       for (int t = 0; t < tiles; ++t)
-        blend_tile_bwd<S, C, kBands, Opt.depth>(in, t, transmittance_.data(), last_.data(), row_mask_.data(), gin,
+        blend_tile_bwd<S, C, kBands, Opt.depth, Opt.absgrad>(in, t, transmittance_.data(), last_.data(), row_mask_.data(), gin,
                                                  records_.data(),
                                                  bg_partial_.data() + std::size_t(t) * std::size_t(count_));
     });
@@ -129,12 +135,14 @@ class Rasterizer {
 #pragma omp parallel for schedule(dynamic, 256)
     for (std::int64_t v = 0; v < V; ++v) {
       const std::uint32_t g = visible_[std::size_t(v)];
-      double acc[BlendRecord::kBase + kBands] = {};
+      double acc[Rec::size(kBands)] = {};
       for (std::uint64_t m = bins_.pair_offset[std::size_t(v)]; m < bins_.pair_offset[std::size_t(v) + 1]; ++m) {
         if (m + kRecordPrefetch < M) {
-          const S* ahead = records_.data() + bins_.pair_slot[m + kRecordPrefetch] * std::uint64_t(R);
+          const std::uint64_t slot_ahead = bins_.pair_slot[m + kRecordPrefetch];
+          const S* ahead = records_.data() + slot_ahead * std::uint64_t(R);
           __builtin_prefetch(ahead);
           __builtin_prefetch(ahead + R - 1);  // a record may straddle two cache lines
+          __builtin_prefetch(row_mask_.data() + slot_ahead);  // read below, as scattered as the records
         }
         const std::uint64_t slot = bins_.pair_slot[m];
         if (row_mask_[slot] == 0) continue;  // blended nowhere in that tile: no record written
@@ -142,23 +150,25 @@ class Rasterizer {
         for (int l = 0; l < R; ++l) acc[l] += double(rec[l]);
       }
       ProjectedGrad pg;
-      pg.mean2d[0] = acc[BlendRecord::kMeanX];
-      pg.mean2d[1] = acc[BlendRecord::kMeanY];
-      pg.conic[0] = acc[BlendRecord::kConicA];
-      pg.conic[1] = acc[BlendRecord::kConicB];
-      pg.conic[2] = acc[BlendRecord::kConicC];
-      pg.opacity = acc[BlendRecord::kOpacity];
-      pg.depth = Opt.depth ? acc[BlendRecord::kDepth] : 0.0;
+      pg.mean2d[0] = acc[Rec::kMeanX];
+      pg.mean2d[1] = acc[Rec::kMeanY];
+      pg.conic[0] = acc[Rec::kConicA];
+      pg.conic[1] = acc[Rec::kConicB];
+      pg.conic[2] = acc[Rec::kConicC];
+      pg.opacity = acc[Rec::kOpacity];
+      if constexpr (Opt.depth) pg.depth = acc[Rec::depth(count)];
       grads.mean2d[2 * g] = S(pg.mean2d[0]);
       grads.mean2d[2 * g + 1] = S(pg.mean2d[1]);
-      grads.absgrad[2 * g] = S(acc[BlendRecord::kAbsX]);
-      grads.absgrad[2 * g + 1] = S(acc[BlendRecord::kAbsY]);
+      if constexpr (Opt.absgrad) {
+        grads.absgrad[2 * g] = S(acc[Rec::abs_x(count)]);
+        grads.absgrad[2 * g + 1] = S(acc[Rec::abs_x(count) + 1]);
+      }
 
       const GaussianGeometry geo = geometry(model, g);
       GeometryGrad gg;
       project_bwd<Opt.antialiased>(geo, pcam, pg, gg);
       colour_bwd(model.sh.data() + std::size_t(g) * G::sh_floats, kBands, first, count, deg, geo.mean - pcam.position,
-                 acc + BlendRecord::kBase, grads.model.sh.data() + std::size_t(g) * G::sh_floats, gg.mean);
+                 acc + Rec::kBase, grads.model.sh.data() + std::size_t(g) * G::sh_floats, gg.mean);
       for (int i = 0; i < 3; ++i) {
         grads.model.means[3 * g + i] = S(gg.mean[i]);
         grads.model.log_scales[3 * g + i] = S(gg.log_scale[i]);
@@ -357,7 +367,8 @@ class Rasterizer {
       for (int k = 0; k < G::sh_coeffs; ++k)
         for (int ch = first_; ch < first_ + count_; ++ch) m.sh_at(i, k, ch) = S(0);
     grads.mean2d.assign(2 * N, S(0));
-    grads.absgrad.assign(2 * N, S(0));
+    if constexpr (Opt.absgrad) grads.absgrad.assign(2 * N, S(0));
+    else grads.absgrad.clear();
   }
 
   RasterTimings timings_;
@@ -385,7 +396,7 @@ class Rasterizer {
   std::vector<std::uint32_t> last_;    // [H, W]
   std::vector<std::uint16_t> row_mask_;// [M] tile rows each intersection blended into
   std::uint64_t fragments_ = 0;
-  std::vector<S> records_;             // [M, BlendRecord::size(count)]
+  std::vector<S> records_;             // [M, BlendRecord<depth, absgrad>::size(count)]
   std::vector<S> bg_partial_;          // [tiles, count]
 };
 

@@ -29,6 +29,10 @@
 
 namespace msgs {
 
+/// The trainer's rasteriser features: absgrad on, since the default densification (and MSAD)
+/// reads it; evaluation uses the same type so the forward is compiled once.
+inline constexpr RasterOptions kTrainRaster{.absgrad = true};
+
 /// A band as one trainer sees it: which model channels render it and which frames show it.
 struct TrainBand {
   std::string id;                         ///< "D", "MS_G", "MS_R", "MS_RE", "MS_NIR"
@@ -184,7 +188,7 @@ class Trainer {
   long long train(long long begin, long long end) {
     using clock = std::chrono::steady_clock;
     const auto t_start = clock::now();
-    Rasterizer<G, float> raster;
+    Rasterizer<G, float, kTrainRaster> raster;
     Gradients<G, float> grads;
     Image<float> d_image;
     SsimWorkspace<float> ws;
@@ -280,7 +284,7 @@ class Trainer {
   std::vector<BandMetrics> evaluate(bool eval_split = true) {
     const auto t0 = std::chrono::steady_clock::now();
     std::vector<BandMetrics> out;
-    Rasterizer<G, float> raster;
+    Rasterizer<G, float, kTrainRaster> raster;
     ImageCache full(*ds_);
     for (const auto& band : bands_) {
       BandMetrics m;

@@ -199,38 +199,61 @@ inline void fmadd_into(T& out, const T& a, const T& b, const T& c) {
   out = a * b + c;
 }
 
-/// out = max(min(v, hi), lo) lane by lane, where min(a, b) = a < b ? a : b and max(a, b) =
-/// a > b ? a : b: a NaN in `v` becomes `hi`. One MINPS and one MAXPS on x86 (GCC does not match the
-/// generic form to them for vector-extension types).
+/// out = a < b ? a : b lane by lane (so b where either is NaN): one MINPS on x86, which GCC does
+/// not match from the generic form for vector-extension types.
 template <class T>
-inline void min_max_into(T& out, const T& v, const T& hi, const T& lo) {
-  if constexpr (std::is_same_v<std::remove_cvref_t<decltype(v[0])>, float>) {
+inline void min_into(T& out, const T& a, const T& b) {
+  if constexpr (std::is_same_v<std::remove_cvref_t<decltype(a[0])>, float>) {
 #if defined(__AVX512F__)
     if constexpr (sizeof(T) == 64) {
-      // The masked forms with a full mask: GCC 12's _mm512_min_ps/_mm512_max_ps trip
-      // -Wmaybe-uninitialized on their internal undefined pass-through operand.
-      const __m512 h = std::bit_cast<__m512>(hi), l = std::bit_cast<__m512>(lo);
-      out = std::bit_cast<T>(_mm512_mask_max_ps(l, __mmask16(0xffff), _mm512_mask_min_ps(h, __mmask16(0xffff), std::bit_cast<__m512>(v), h), l));
+      // The masked form with a full mask: GCC 12's _mm512_min_ps trips -Wmaybe-uninitialized on
+      // its internal undefined pass-through operand.
+      const __m512 bb = std::bit_cast<__m512>(b);
+      out = std::bit_cast<T>(_mm512_mask_min_ps(bb, __mmask16(0xffff), std::bit_cast<__m512>(a), bb));
       return;
     }
 #endif
 #if defined(__AVX__)
     if constexpr (sizeof(T) == 32) {
-      out = std::bit_cast<T>(_mm256_max_ps(_mm256_min_ps(std::bit_cast<__m256>(v), std::bit_cast<__m256>(hi)),
-                                           std::bit_cast<__m256>(lo)));
+      out = std::bit_cast<T>(_mm256_min_ps(std::bit_cast<__m256>(a), std::bit_cast<__m256>(b)));
       return;
     }
 #endif
 #if defined(__SSE2__)
     if constexpr (sizeof(T) == 16) {
-      out = std::bit_cast<T>(_mm_max_ps(_mm_min_ps(std::bit_cast<__m128>(v), std::bit_cast<__m128>(hi)),
-                                        std::bit_cast<__m128>(lo)));
+      out = std::bit_cast<T>(_mm_min_ps(std::bit_cast<__m128>(a), std::bit_cast<__m128>(b)));
       return;
     }
 #endif
   }
-  const T m = v < hi ? v : hi;
-  out = m > lo ? m : lo;
+  out = a < b ? a : b;
+}
+
+/// out = a > b ? a : b lane by lane (so b where either is NaN): one MAXPS on x86.
+template <class T>
+inline void max_into(T& out, const T& a, const T& b) {
+  if constexpr (std::is_same_v<std::remove_cvref_t<decltype(a[0])>, float>) {
+#if defined(__AVX512F__)
+    if constexpr (sizeof(T) == 64) {
+      const __m512 bb = std::bit_cast<__m512>(b);
+      out = std::bit_cast<T>(_mm512_mask_max_ps(bb, __mmask16(0xffff), std::bit_cast<__m512>(a), bb));
+      return;
+    }
+#endif
+#if defined(__AVX__)
+    if constexpr (sizeof(T) == 32) {
+      out = std::bit_cast<T>(_mm256_max_ps(std::bit_cast<__m256>(a), std::bit_cast<__m256>(b)));
+      return;
+    }
+#endif
+#if defined(__SSE2__)
+    if constexpr (sizeof(T) == 16) {
+      out = std::bit_cast<T>(_mm_max_ps(std::bit_cast<__m128>(a), std::bit_cast<__m128>(b)));
+      return;
+    }
+#endif
+  }
+  out = a > b ? a : b;
 }
 
 /// out = exp(-s) for s >= 0, lane by lane: the Gaussian falloff of the blend
@@ -245,9 +268,9 @@ inline void exp_neg_into(T& out, const T& s_in) {
   T zero, hi;
   broadcast(zero, Lane(0));
   broadcast(hi, Lane(87));
-  // min first, with the semantics of x86 MINPS/MAXPS (the second operand wins when the comparison
-  // is false, NaN included): NaN -> 87 -> exp(-87).
-  min_max_into(s, s, hi, zero);
+  // min first: NaN -> 87 -> exp(-87).
+  min_into(s, s, hi);
+  max_into(s, s, zero);
   if constexpr (std::is_same_v<Lane, float>) {
     typedef std::int32_t IV __attribute__((vector_size(sizeof(T))));
     const T x = -s;
@@ -272,7 +295,9 @@ inline void exp_neg_into(T& out, const T& s_in) {
     const IV e = (__builtin_convertvector(n, IV) + 127) << 23;
     out = y * std::bit_cast<T>(e);
   } else {
-    for (int i = 0; i < int(sizeof(T) / sizeof(Lane)); ++i) out[i] = std::exp(-s[i]);
+    T r = s;  // filled lane by lane from an initialised vector (GCC otherwise warns on `out`)
+    for (int i = 0; i < int(sizeof(T) / sizeof(Lane)); ++i) r[i] = std::exp(-s[i]);
+    out = r;
   }
 }
 
