@@ -125,3 +125,40 @@ TEST_CASE("absgrad off changes nothing but Gradients::absgrad (left empty)") {
   CHECK(b.grads.absgrad.empty());
   check_same(a, b, false);
 }
+
+TEST_CASE("a reused Gradients object carries nothing over from the previous backward") {
+  // The backward writes every gradient of a visible Gaussian and zeroes only the rest (culled
+  // Gaussians, SH above the active degree): a second backward into the same object must give the
+  // bits of a fresh one, also when the second frame culls what the first rendered.
+  const Camera<float> cam = test_camera<float>(96, 80, 50.0, 48.0, 40.0);
+  SceneParams sp;
+  sp.n = 1200;
+  sp.log_scale_min = std::log(0.01);
+  sp.log_scale_max = std::log(0.15);
+  const GaussianModel<G, float> m = random_scene<G, float>(cam, sp, 79);
+  Camera<float> shifted = cam;
+  shifted.cx += 40.0f;  // a third of the scene leaves the view
+  R r;
+  RenderSettings<float> all;
+  const Run first = run(r, m, cam, all, 2);
+  REQUIRE(first.fragments > 1000);
+  RenderSettings<float> low;
+  low.sh_degree = 1;
+  Run reused;
+  reused.grads = first.grads;  // stale values everywhere
+  R r2;
+  r2.forward(m, shifted, low);
+  const Image<float> wi = weights(cam.width, cam.height, G::bands, 1), wa = weights(cam.width, cam.height, 1, 2),
+                     wd = weights(cam.width, cam.height, 1, 3);
+  r2.backward(wi, &wa, &wd, reused.grads);
+  REQUIRE(r2.visible_count() < m.size());
+  Gradients<G, float> fresh;
+  r2.backward(wi, &wa, &wd, fresh);
+  CHECK(bitwise_equal(reused.grads.model.means, fresh.model.means));
+  CHECK(bitwise_equal(reused.grads.model.log_scales, fresh.model.log_scales));
+  CHECK(bitwise_equal(reused.grads.model.quats, fresh.model.quats));
+  CHECK(bitwise_equal(reused.grads.model.opacity_logits, fresh.model.opacity_logits));
+  CHECK(bitwise_equal(reused.grads.model.sh, fresh.model.sh));
+  CHECK(bitwise_equal(reused.grads.mean2d, fresh.mean2d));
+  CHECK(bitwise_equal(reused.grads.absgrad, fresh.absgrad));
+}

@@ -63,13 +63,26 @@ struct Binning {
   std::vector<std::uint64_t> tile_offset;  ///< [tiles + 1] tile t owns tile_list[tile_offset[t] .. tile_offset[t+1])
 
   std::uint64_t pairs() const { return tile_list.size(); }
+
+  /// Working memory of bin_gaussians, kept between frames so that binning does not allocate (and
+  /// page-fault) anew every frame. Not part of the result.
+  struct Scratch {
+    std::vector<std::uint64_t> keys, keys2;  // depth keys (radix sort)
+    std::vector<std::uint32_t> pos, pos2;    // positions into the visible ids (radix sort)
+    struct TileRect {
+      std::int32_t tx0, ty0, tx1, ty1;
+    };
+    std::vector<TileRect> rects;             // [V] tile rectangles in depth order
+    std::vector<std::uint64_t> hist;         // [chunks, tiles] or [chunks, 256]
+  } scratch;
 };
 
 namespace detail {
 
-/// Order-preserving unsigned key of a positive depth (float or double bit pattern).
+/// Order-preserving unsigned key of a positive depth (float or double bit pattern), widened to
+/// 64 bits.
 template <class S>
-inline auto depth_key(S z) {
+inline std::uint64_t depth_key(S z) {
   if constexpr (std::is_same_v<S, float>) {
     std::uint32_t k; std::memcpy(&k, &z, sizeof k); return k;
   } else {
@@ -77,27 +90,58 @@ inline auto depth_key(S z) {
   }
 }
 
-/// Stable LSD radix sort of `ids` by `keys` (bytes of the key, low to high); equal keys keep their
-/// input order, so ties stay ordered by Gaussian index.
-template <class Key>
-inline void radix_sort_by_key(std::vector<Key>& keys, std::vector<std::uint32_t>& ids) {
+/// Number of fixed chunks a pass over `n` items is split into: independent of the thread count,
+/// so that every result (and its bits) is too.
+inline int fixed_chunks(std::size_t n) { return int(std::clamp<std::size_t>(n / 4096, 1, 64)); }
+
+/// Stable LSD radix sort of `ids` by `keys` (bytes of the key, low to high, `key_bytes` of them);
+/// equal keys keep their input order, so ties stay ordered by Gaussian index. Each pass is a
+/// chunked counting sort (per-chunk histograms, then every chunk scatters from its own cursors),
+/// parallel over a fixed number of chunks. `keys2`, `ids2` and `hist` are scratch.
+inline void radix_sort_by_key(std::vector<std::uint64_t>& keys, std::vector<std::uint32_t>& ids, int key_bytes,
+                              std::vector<std::uint64_t>& keys2, std::vector<std::uint32_t>& ids2,
+                              std::vector<std::uint64_t>& hist) {
   const std::size_t n = keys.size();
-  std::vector<Key> k2(n);
-  std::vector<std::uint32_t> i2(n);
-  for (unsigned shift = 0; shift < 8 * sizeof(Key); shift += 8) {
-    std::size_t count[257] = {};
-    for (std::size_t i = 0; i < n; ++i) ++count[((keys[i] >> shift) & 0xff) + 1];
-    bool trivial = false;  // all keys share this byte: the pass would be the identity
-    for (int b = 1; b <= 256; ++b) trivial = trivial || count[b] == n;
-    if (trivial) continue;
-    for (int b = 0; b < 256; ++b) count[b + 1] += count[b];
-    for (std::size_t i = 0; i < n; ++i) {
-      const std::size_t pos = count[(keys[i] >> shift) & 0xff]++;
-      k2[pos] = keys[i];
-      i2[pos] = ids[i];
+  keys2.resize(n);
+  ids2.resize(n);
+  const int chunks = fixed_chunks(n);
+  auto chunk_begin = [&](int k) { return n * std::size_t(k) / std::size_t(chunks); };
+  hist.assign(std::size_t(chunks) * 256, 0);
+  for (int byte = 0; byte < key_bytes; ++byte) {
+    const unsigned shift = 8u * unsigned(byte);
+    std::fill(hist.begin(), hist.end(), 0);
+#pragma omp parallel for schedule(static)
+    for (int k = 0; k < chunks; ++k) {
+      std::uint64_t* h = hist.data() + std::size_t(k) * 256;
+      for (std::size_t i = chunk_begin(k); i < chunk_begin(k + 1); ++i) ++h[(keys[i] >> shift) & 0xff];
     }
-    keys.swap(k2);
-    ids.swap(i2);
+    // Every key shares this byte: the pass would be the identity.
+    bool trivial = false;
+    for (int b = 0; b < 256 && !trivial; ++b) {
+      std::uint64_t total = 0;
+      for (int k = 0; k < chunks; ++k) total += hist[std::size_t(k) * 256 + std::size_t(b)];
+      trivial = total == n;
+    }
+    if (trivial) continue;
+    std::uint64_t sum = 0;  // cursors: bucket-major, chunk-minor (stable)
+    for (int b = 0; b < 256; ++b)
+      for (int k = 0; k < chunks; ++k) {
+        std::uint64_t& h = hist[std::size_t(k) * 256 + std::size_t(b)];
+        const std::uint64_t c = h;
+        h = sum;
+        sum += c;
+      }
+#pragma omp parallel for schedule(static)
+    for (int k = 0; k < chunks; ++k) {
+      std::uint64_t* cursor = hist.data() + std::size_t(k) * 256;
+      for (std::size_t i = chunk_begin(k); i < chunk_begin(k + 1); ++i) {
+        const std::uint64_t p = cursor[(keys[i] >> shift) & 0xff]++;
+        keys2[p] = keys[i];
+        ids2[p] = ids[i];
+      }
+    }
+    keys.swap(keys2);
+    ids.swap(ids2);
   }
 }
 
@@ -111,22 +155,32 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
   constexpr int TS = TileGrid::kTileSize;
   const std::size_t V = visible_ids.size();
   const int tiles = grid.count();
+  Binning::Scratch& sc = out.scratch;
 
-  // 1. Front-to-back order of the visible Gaussians.
-  using Key = decltype(detail::depth_key(S(0)));
-  // Sorted are positions v into visible_ids (increasing ids, so ties stay ordered by id).
-  std::vector<Key> keys(V);
-  std::vector<std::uint32_t> pos(V);
+  // 1. Front-to-back order of the visible Gaussians. Sorted are positions v into visible_ids
+  //    (increasing ids, so ties stay ordered by id).
+  sc.keys.resize(V);
+  sc.pos.resize(V);
   for (std::size_t v = 0; v < V; ++v) {
-    keys[v] = detail::depth_key(depth[visible_ids[v]]);
-    pos[v] = std::uint32_t(v);
+    sc.keys[v] = detail::depth_key(depth[visible_ids[v]]);
+    sc.pos[v] = std::uint32_t(v);
   }
-  detail::radix_sort_by_key(keys, pos);
+  detail::radix_sort_by_key(sc.keys, sc.pos, int(sizeof(S)), sc.keys2, sc.pos2, sc.hist);
+  // The order and the tile rectangles in that order, gathered once so that the two passes below
+  // read them sequentially.
   out.order.resize(V);
-  for (std::size_t s = 0; s < V; ++s) out.order[s] = visible_ids[pos[s]];
+  sc.rects.resize(V);
+#pragma omp parallel for schedule(static)
+  for (std::int64_t i = 0; i < std::int64_t(V); ++i) {
+    const std::uint32_t g = visible_ids[sc.pos[std::size_t(i)]];
+    out.order[std::size_t(i)] = g;
+    const PixelRect& r = rects[g];
+    sc.rects[std::size_t(i)] = {r.x0 / TS, r.y0 / TS, r.x1 / TS, r.y1 / TS};
+  }
 
   // 2. Pairs per Gaussian (tile-rectangle area), prefix-summed in id order.
-  out.pair_offset.assign(V + 1, 0);
+  out.pair_offset.resize(V + 1);
+  out.pair_offset[0] = 0;
   for (std::size_t v = 0; v < V; ++v) {
     const PixelRect& r = rects[visible_ids[v]];
     const std::uint64_t nx = std::uint64_t(r.x1 / TS - r.x0 / TS + 1), ny = std::uint64_t(r.y1 / TS - r.y0 / TS + 1);
@@ -134,25 +188,25 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
   }
   const std::uint64_t M = out.pair_offset[V];
 
-  // 3. Stable counting sort by tile over a fixed number of chunks (independent of the thread
-  //    count, so the result is too).
-  const int chunks = int(std::clamp<std::size_t>(V / 4096, 1, 64));
-  std::vector<std::uint64_t> hist(std::size_t(chunks) * std::size_t(tiles), 0);  // [chunks, tiles]
+  // 3. Stable counting sort by tile over a fixed number of chunks.
+  const int chunks = detail::fixed_chunks(V);
+  sc.hist.assign(std::size_t(chunks) * std::size_t(tiles), 0);  // [chunks, tiles]
   auto chunk_begin = [&](int k) { return V * std::size_t(k) / std::size_t(chunks); };
 #pragma omp parallel for schedule(static)
   for (int k = 0; k < chunks; ++k) {
-    std::uint64_t* h = hist.data() + std::size_t(k) * std::size_t(tiles);
+    std::uint64_t* h = sc.hist.data() + std::size_t(k) * std::size_t(tiles);
     for (std::size_t s = chunk_begin(k); s < chunk_begin(k + 1); ++s) {
-      const PixelRect& r = rects[out.order[s]];
-      for (int ty = r.y0 / TS; ty <= r.y1 / TS; ++ty)
-        for (int tx = r.x0 / TS; tx <= r.x1 / TS; ++tx) ++h[std::size_t(ty) * std::size_t(grid.tiles_x) + std::size_t(tx)];
+      const Binning::Scratch::TileRect& r = sc.rects[s];
+      for (int ty = r.ty0; ty <= r.ty1; ++ty)
+        for (int tx = r.tx0; tx <= r.tx1; ++tx) ++h[std::size_t(ty) * std::size_t(grid.tiles_x) + std::size_t(tx)];
     }
   }
-  out.tile_offset.assign(std::size_t(tiles) + 1, 0);
+  out.tile_offset.resize(std::size_t(tiles) + 1);
+  out.tile_offset[0] = 0;
   for (int t = 0; t < tiles; ++t) {
     std::uint64_t sum = out.tile_offset[std::size_t(t)];
     for (int k = 0; k < chunks; ++k) {
-      std::uint64_t& h = hist[std::size_t(k) * std::size_t(tiles) + std::size_t(t)];
+      std::uint64_t& h = sc.hist[std::size_t(k) * std::size_t(tiles) + std::size_t(t)];
       const std::uint64_t c = h;
       h = sum;  // becomes this chunk's write cursor for tile t
       sum += c;
@@ -163,13 +217,13 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
   out.pair_slot.resize(M);
 #pragma omp parallel for schedule(static)
   for (int k = 0; k < chunks; ++k) {
-    std::uint64_t* cursor = hist.data() + std::size_t(k) * std::size_t(tiles);
+    std::uint64_t* cursor = sc.hist.data() + std::size_t(k) * std::size_t(tiles);
     for (std::size_t s = chunk_begin(k); s < chunk_begin(k + 1); ++s) {
       const std::uint32_t g = out.order[s];
-      const PixelRect& r = rects[g];
-      std::uint64_t m = out.pair_offset[pos[s]];
-      for (int ty = r.y0 / TS; ty <= r.y1 / TS; ++ty)
-        for (int tx = r.x0 / TS; tx <= r.x1 / TS; ++tx) {
+      const Binning::Scratch::TileRect& r = sc.rects[s];
+      std::uint64_t m = out.pair_offset[sc.pos[s]];
+      for (int ty = r.ty0; ty <= r.ty1; ++ty)
+        for (int tx = r.tx0; tx <= r.tx1; ++tx) {
           const std::uint64_t slot = cursor[std::size_t(ty) * std::size_t(grid.tiles_x) + std::size_t(tx)]++;
           out.tile_list[slot] = g;
           out.pair_slot[m++] = slot;

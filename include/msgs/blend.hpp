@@ -26,12 +26,13 @@ struct Splat {
   PixelRect rect;  ///< pixels that may receive alpha >= 1/255
 };
 
-/// Sets s.sigma_cut from s.o: a conservative bound past which o e^-sigma < 1/255, so that the
-/// blend can skip a tile row after sigma alone. The 1e-3 margin covers the rounding of the log and
-/// of the exponential, so the exact path could only have rejected those fragments too.
+/// Sets s.sigma_cut from `support` = ln(255 o) (ProjectedGaussian::support): a conservative bound
+/// past which o e^-sigma < 1/255, so that the blend can skip a tile row after sigma alone. The 1e-3
+/// margin covers the rounding of s.o, of the exponential and of sigma, so the exact path could only
+/// have rejected those fragments too.
 template <class S>
-inline void set_sigma_cut(Splat<S>& s) {
-  s.sigma_cut = S(std::log(S(255) * s.o)) + S(1e-3);
+inline void set_sigma_cut(Splat<S>& s, double support) {
+  s.sigma_cut = S(support) + S(1e-3);
 }
 
 /// How many tile-list entries ahead the blend loops prefetch splat data (random access by id).
@@ -290,8 +291,8 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
 
 /// Backward of blend_tile_fwd for one tile: walks the tile's list back to front, rebuilding each
 /// pixel's transmittance by division (alpha <= 0.99 keeps it well conditioned), and writes one
-/// gradient record per intersection into `records` ([M, BlendRecord<Depth, AbsGrad>::size(count)]) for every
-/// intersection whose row mask is non-zero; the others are left unwritten (their gradient is zero). Adds the
+/// gradient record per intersection of the tile into `records` ([M, BlendRecord<Depth,
+/// AbsGrad>::size(count)], row = position in the tile list; zeros where the row mask is 0). Adds the
 /// tile's background gradient into `d_background` ([count]). Alpha is evaluated by the same
 /// expressions as in the forward, so both make the same fragment decisions.
 template <class S, int C, int MaxC, bool Depth, bool AbsGrad>
@@ -370,10 +371,15 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
       __builtin_prefetch(in.splats + gp);
       __builtin_prefetch(in.colours + std::size_t(gp) * std::size_t(nc));
     }
+    S* rec = records + jr * std::uint64_t(R);
     // A splat the forward blended into no pixel of this tile (its box touches the tile, its
-    // alpha >= 1/255 region does not, or every pixel had stopped) has no gradient here; its record
-    // is left unwritten and the reduction skips it by the same row mask.
-    if (row_mask[jr] == 0) continue;
+    // alpha >= 1/255 region does not, or every pixel had stopped) has no gradient here. Its record
+    // is written all the same (zeros; the records are written in list order, so that is cheap),
+    // so that the gradient reduction reads records only, not the row masks at scattered slots.
+    if (row_mask[jr] == 0) {
+      std::fill_n(rec, R, S(0));
+      continue;
+    }
     const std::uint32_t g = list[jr];
     const Splat<S> s = in.splats[g];
     U k;  // a pixel blended this splat iff k < last
@@ -442,7 +448,6 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
     }
     S sum[NL];
     detail::sum_rows(lane, NL, sum);
-    S* rec = records + jr * std::uint64_t(R);
     // dL/dsigma = -u: dL/dmean = -(conic (sum v dx, sum v dy)) with v = dL/dsigma, and so on.
     rec[Rec::kMeanX] = s.a * sum[kU0x] + s.b * sum[kU1];
     rec[Rec::kMeanY] = s.b * sum[kU0x] + s.c * sum[kU1];
@@ -457,8 +462,8 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
       rec[Rec::abs_x(nc) + 1] = sum[kAbsY];
     }
   }
-  // Splats behind every pixel's last blended one have row mask 0 (see blend_tile_fwd): their
-  // records are not written either.
+  // Splats behind every pixel's last blended one (row mask 0, see blend_tile_fwd): zero records.
+  std::fill(records + (begin + max_last) * std::uint64_t(R), records + end * std::uint64_t(R), S(0));
 }
 
 }  // namespace msgs

@@ -77,6 +77,7 @@ struct ProjectedGaussian {
   double depth = 0;           ///< camera-space z
   double opacity = 0;         ///< sigmoid(logit), times the antialiasing factor when enabled
   double extent[2] = {0, 0};  ///< half-extent in pixels (x, y) of the region where alpha >= 1/255
+  double support = 0;         ///< ln(255 opacity): alpha >= 1/255 exactly where sigma <= support
 };
 
 // Small fixed-trip loops of the projection are unrolled completely before the vectoriser sees
@@ -153,9 +154,12 @@ struct ProjectionCache {
 /// non-finite parameters, degenerate quaternion, outside (near, far], invisible opacity,
 /// degenerate screen covariance, or entirely off-screen. `Antialiased` multiplies the opacity by
 /// sqrt(det cov2d / det(cov2d + 0.3 I)) (floored at 0.005), gsplat's antialiased mode.
+/// `known_visible` (with `cache_out`, for a backward pass of a Gaussian its forward found visible
+/// with the same inputs): skip the screen-extent tests, which could only pass again; `out.extent`
+/// and `out.support` are then not set.
 template <bool Antialiased>
 inline bool project_fwd(const GaussianGeometry& g, const ProjectCamera& cam, ProjectedGaussian& out,
-                        detail::ProjectionCache* cache_out = nullptr) {
+                        detail::ProjectionCache* cache_out = nullptr, bool known_visible = false) {
   using PC = ProjectConstants;
   out.visible = false;
   const double mean[3] = {g.mean[0], g.mean[1], g.mean[2]};
@@ -199,11 +203,12 @@ inline bool project_fwd(const GaussianGeometry& g, const ProjectCamera& cam, Pro
   // A Gaussian culled here is one the exact test below would cull too, so the backward (which
   // recomputes the projection of a Gaussian it knows to be visible, with cache_out set) skips it.
   // Without antialiasing the opacity is sig, so kb is also the extent's factor below.
-  double kb = -1.0;
+  double kb = -1.0, log_sig = 0.0;
   if (!cache_out) {
     const double ls_max = std::max(ls[0], std::max(ls[1], ls[2]));
     const double smax = std::exp(std::clamp(ls_max, -PC::kLogScaleClamp, PC::kLogScaleClamp));
-    kb = std::sqrt(std::max(0.0, 2.0 * std::log(c.sig / PC::kMinAlpha)));
+    log_sig = std::log(c.sig / PC::kMinAlpha);
+    kb = std::sqrt(std::max(0.0, 2.0 * log_sig));
     const double sx = smax * cam.fx * c.inv_tz, sy = smax * cam.fy * c.inv_tz;
     const double bx = kb * std::sqrt(sx * sx * (1.0 + txc * txc) + PC::kDilation) * (1.0 + 1e-6) + 1e-6;
     const double by = kb * std::sqrt(sy * sy * (1.0 + tyc * tyc) + PC::kDilation) * (1.0 + 1e-6) + 1e-6;
@@ -269,18 +274,22 @@ inline bool project_fwd(const GaussianGeometry& g, const ProjectCamera& cam, Pro
   out.conic[2] = c.blur[0] * inv_det;
   out.depth = tz;
   out.opacity = opacity;
-  // alpha >= 1/255  <=>  sigma <= ln(255 o): the exact support, no 3-sigma cut-off, so the tiled
-  // renderer paints exactly what a per-pixel loop over all Gaussians would.
-  const double k = (!Antialiased && kb >= 0.0) ? kb : std::sqrt(std::max(0.0, 2.0 * std::log(opacity / PC::kMinAlpha)));
-  out.extent[0] = k * std::sqrt(c.blur[0]);
-  out.extent[1] = k * std::sqrt(c.blur[2]);
-  if (!std::isfinite(out.mean2d[0]) || !std::isfinite(out.mean2d[1]) || !std::isfinite(out.extent[0]) ||
-      !std::isfinite(out.extent[1]))
-    return false;
-  // Entirely off-screen (with a pixel of margin)?
-  if (out.mean2d[0] + out.extent[0] < -1.0 || out.mean2d[0] - out.extent[0] > cam.width + 1.0 ||
-      out.mean2d[1] + out.extent[1] < -1.0 || out.mean2d[1] - out.extent[1] > cam.height + 1.0)
-    return false;
+  if (!(cache_out && known_visible)) {
+    // alpha >= 1/255  <=>  sigma <= ln(255 o): the exact support, no 3-sigma cut-off, so the tiled
+    // renderer paints exactly what a per-pixel loop over all Gaussians would.
+    const bool reuse = !Antialiased && kb >= 0.0;  // opacity == sig: the pre-test's values hold
+    out.support = reuse ? log_sig : std::log(opacity / PC::kMinAlpha);
+    const double k = reuse ? kb : std::sqrt(std::max(0.0, 2.0 * out.support));
+    out.extent[0] = k * std::sqrt(c.blur[0]);
+    out.extent[1] = k * std::sqrt(c.blur[2]);
+    if (!std::isfinite(out.mean2d[0]) || !std::isfinite(out.mean2d[1]) || !std::isfinite(out.extent[0]) ||
+        !std::isfinite(out.extent[1]))
+      return false;
+    // Entirely off-screen (with a pixel of margin)?
+    if (out.mean2d[0] + out.extent[0] < -1.0 || out.mean2d[0] - out.extent[0] > cam.width + 1.0 ||
+        out.mean2d[1] + out.extent[1] < -1.0 || out.mean2d[1] - out.extent[1] > cam.height + 1.0)
+      return false;
+  }
   out.visible = true;
   if (cache_out) *cache_out = c;
   return true;
@@ -303,13 +312,14 @@ struct GeometryGrad {
 };
 
 /// Backward of project_fwd: accumulates into `grad` the gradient of the loss with respect to the
-/// Gaussian's parameters, given the gradients `v` of its screen-space quantities.
+/// Gaussian's parameters, given the gradients `v` of its screen-space quantities. `known_visible`:
+/// the caller's forward found this Gaussian visible with the same inputs (see project_fwd).
 template <bool Antialiased>
 inline void project_bwd(const GaussianGeometry& g, const ProjectCamera& cam, const ProjectedGrad& v,
-                        GeometryGrad& grad) {
+                        GeometryGrad& grad, bool known_visible = false) {
   ProjectedGaussian out;
   detail::ProjectionCache c;
-  if (!project_fwd<Antialiased>(g, cam, out, &c)) return;
+  if (!project_fwd<Antialiased>(g, cam, out, &c, known_visible)) return;
   const double* W = cam.rot;
 
   // Opacity: o = sigmoid(logit) * compensation.
@@ -343,13 +353,13 @@ inline void project_bwd(const GaussianGeometry& g, const ProjectCamera& cam, con
   // GJ = G J (2x3), J = [[J00, 0, J02], [0, J11, J12]].
   const double GJ[2][3] = {{G00 * c.J00, G01 * c.J11, G00 * c.J02 + G01 * c.J12},
                            {G10 * c.J00, G11 * c.J11, G10 * c.J02 + G11 * c.J12}};
-  // v_cov_cam = J^T GJ (3x3, row-major).
+  // v_cc2 = 2 v_cov_cam = 2 J^T GJ (3x3, row-major); the 2 is the one of dL/dM below.
   const double Jcol[3][2] = {{c.J00, 0.0}, {0.0, c.J11}, {c.J02, c.J12}};  // column i of J
-  double v_cc[9];
+  double v_cc2[9];
   MSGS_UNROLL
   for (int i = 0; i < 3; ++i)
     MSGS_UNROLL
-    for (int j = 0; j < 3; ++j) v_cc[3 * i + j] = Jcol[i][0] * GJ[0][j] + Jcol[i][1] * GJ[1][j];
+    for (int j = 0; j < 3; ++j) v_cc2[3 * i + j] = 2.0 * (Jcol[i][0] * GJ[0][j] + Jcol[i][1] * GJ[1][j]);
   // C = WM WM^T; v_J = 2 GJ C, needed at (0,0), (0,2), (1,1), (1,2).
   double C[9];
   MSGS_UNROLL
@@ -389,11 +399,10 @@ inline void project_bwd(const GaussianGeometry& g, const ProjectCamera& cam, con
   for (int i = 0; i < 3; ++i) grad.mean[i] += W[i] * v_t[0] + W[3 + i] * v_t[1] + W[6 + i] * v_t[2];
 
   // cov_cam = W Sigma W^T; Sigma = M M^T with M = Rq diag(s):
-  // dL/dM = 2 W^T v_cc W M = 2 W^T (v_cc WM).
+  // dL/dM = 2 W^T v_cov_cam W M = W^T (v_cc2 WM).
   double X[9], v_M[9];
-  detail::mul33(v_cc, c.WM, X);
+  detail::mul33(v_cc2, c.WM, X);
   detail::mul33_tn(W, X, v_M);
-  for (double& e : v_M) e *= 2.0;
   double v_Rq[9];
   MSGS_UNROLL
   for (int j = 0; j < 3; ++j) {

@@ -138,14 +138,11 @@ class Rasterizer {
       double acc[Rec::size(kBands)] = {};
       for (std::uint64_t m = bins_.pair_offset[std::size_t(v)]; m < bins_.pair_offset[std::size_t(v) + 1]; ++m) {
         if (m + kRecordPrefetch < M) {
-          const std::uint64_t slot_ahead = bins_.pair_slot[m + kRecordPrefetch];
-          const S* ahead = records_.data() + slot_ahead * std::uint64_t(R);
+          const S* ahead = records_.data() + bins_.pair_slot[m + kRecordPrefetch] * std::uint64_t(R);
           __builtin_prefetch(ahead);
           __builtin_prefetch(ahead + R - 1);  // a record may straddle two cache lines
-          __builtin_prefetch(row_mask_.data() + slot_ahead);  // read below, as scattered as the records
         }
         const std::uint64_t slot = bins_.pair_slot[m];
-        if (row_mask_[slot] == 0) continue;  // blended nowhere in that tile: no record written
         const S* rec = records_.data() + slot * std::uint64_t(R);
         for (int l = 0; l < R; ++l) acc[l] += double(rec[l]);
       }
@@ -166,7 +163,7 @@ class Rasterizer {
 
       const GaussianGeometry geo = geometry(model, g);
       GeometryGrad gg;
-      project_bwd<Opt.antialiased>(geo, pcam, pg, gg);
+      project_bwd<Opt.antialiased>(geo, pcam, pg, gg, /*known_visible=*/true);
       colour_bwd(model.sh.data() + std::size_t(g) * G::sh_floats, kBands, first, count, deg, geo.mean - pcam.position,
                  acc + Rec::kBase, grads.model.sh.data() + std::size_t(g) * G::sh_floats, gg.mean);
       for (int i = 0; i < 3; ++i) {
@@ -256,9 +253,9 @@ class Rasterizer {
     splats_.resize(N);
     colours_.resize(N * std::size_t(count_));
     depth_.resize(N);
-    rects_.assign(N, PixelRect{});
-    radii_.assign(2 * N, 0);
-    visible_flag_.assign(N, 0);
+    rects_.resize(N);  // these three are written for every Gaussian by project_all
+    radii_.resize(2 * N);
+    visible_flag_.resize(N);
   }
 
   void project_all(const Model& model) {
@@ -267,6 +264,9 @@ class Rasterizer {
     const int K = sh_coeffs_for_degree(deg);
 #pragma omp parallel for schedule(dynamic, 1024)
     for (std::int64_t i = 0; i < N; ++i) {
+      rects_[std::size_t(i)] = PixelRect{};  // culled until shown otherwise
+      radii_[2 * std::size_t(i)] = radii_[2 * std::size_t(i) + 1] = 0;
+      visible_flag_[std::size_t(i)] = 0;
       const GaussianGeometry geo = geometry(model, std::size_t(i));
       ProjectedGaussian pg;
       if (!project_fwd<Opt.antialiased>(geo, pcam_, pg)) continue;
@@ -292,7 +292,7 @@ class Rasterizer {
       s.a = S(pg.conic[0]); s.b = S(pg.conic[1]); s.c = S(pg.conic[2]);
       s.o = S(pg.opacity);
       s.z = S(pg.depth);
-      set_sigma_cut(s);
+      set_sigma_cut(s, pg.support);
       s.rect = rect;
       depth_[std::size_t(i)] = S(pg.depth);
       for (int ch = 0; ch < count; ++ch) colours_[std::size_t(i) * std::size_t(count) + std::size_t(ch)] = S(col[ch]);
@@ -356,19 +356,30 @@ class Rasterizer {
     fragments_ = frags;
   }
 
+  /// Zero what the gradient reduction will not write: every gradient of a culled Gaussian, and
+  /// for visible ones the SH coefficients above the active degree (of the rendered channels).
+  /// In parallel, since it touches every Gaussian.
   void zero_grads(Gradients<G, S>& grads) const {
-    const std::size_t N = model_->size();
+    const std::int64_t N = std::int64_t(model_->size());
     auto& m = grads.model;
-    std::fill(m.means.begin(), m.means.end(), S(0));
-    std::fill(m.log_scales.begin(), m.log_scales.end(), S(0));
-    std::fill(m.quats.begin(), m.quats.end(), S(0));
-    std::fill(m.opacity_logits.begin(), m.opacity_logits.end(), S(0));
-    for (std::size_t i = 0; i < N; ++i)
-      for (int k = 0; k < G::sh_coeffs; ++k)
-        for (int ch = first_; ch < first_ + count_; ++ch) m.sh_at(i, k, ch) = S(0);
-    grads.mean2d.assign(2 * N, S(0));
-    if constexpr (Opt.absgrad) grads.absgrad.assign(2 * N, S(0));
+    grads.mean2d.resize(2 * std::size_t(N));
+    if constexpr (Opt.absgrad) grads.absgrad.resize(2 * std::size_t(N));
     else grads.absgrad.clear();
+    const int k_active = sh_coeffs_for_degree(sh_degree_), first = first_, last = first_ + count_;
+#pragma omp parallel for schedule(static, 4096)
+    for (std::int64_t ii = 0; ii < N; ++ii) {
+      const std::size_t i = std::size_t(ii);
+      const bool culled = !visible_flag_[i];
+      if (culled) {
+        for (int a = 0; a < 3; ++a) m.means[3 * i + std::size_t(a)] = m.log_scales[3 * i + std::size_t(a)] = S(0);
+        for (int a = 0; a < 4; ++a) m.quats[4 * i + std::size_t(a)] = S(0);
+        m.opacity_logits[i] = S(0);
+        grads.mean2d[2 * i] = grads.mean2d[2 * i + 1] = S(0);
+        if constexpr (Opt.absgrad) grads.absgrad[2 * i] = grads.absgrad[2 * i + 1] = S(0);
+      }
+      for (int k = culled ? 0 : k_active; k < G::sh_coeffs; ++k)
+        for (int ch = first; ch < last; ++ch) m.sh_at(i, k, ch) = S(0);
+    }
   }
 
   RasterTimings timings_;
