@@ -402,12 +402,6 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
       V dyv, dy2v;
       detail::broadcast(dyv, dy);
       detail::broadcast(dy2v, dy * dy);
-      // acc = ok ? acc + a b : acc, one masked FMA with AVX-512.
-      const auto add_if = [](V& acc, const M& ok, const V& a, const V& b) {
-        V t;
-        detail::fmadd_into(t, a, b, acc);
-        acc = ok ? t : acc;
-      };
       for (int h = 0; h < NH; ++h) {
         const int q = r * NH + h;
         detail::RowAlpha<S> f;
@@ -422,9 +416,9 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
         if constexpr (Depth) detail::fmadd_into(cd, z, dD[q], cd);
         V v_alpha;
         detail::fmadd_into(v_alpha, Ti, cd, ra * (t_final_terms[q] - B[q]));
-        add_if(B[q], ok, fac, cd);
-        for (int ch = 0; ch < NC; ++ch) add_if(lane[(kCol + ch) * NH + h], ok, fac, dimg[ch][q]);
-        if constexpr (Depth) add_if(lane[kDep * NH + h], ok, fac, dD[q]);
+        detail::fmadd_where(B[q], ok, fac, cd);
+        for (int ch = 0; ch < NC; ++ch) detail::fmadd_where(lane[(kCol + ch) * NH + h], ok, fac, dimg[ch][q]);
+        if constexpr (Depth) detail::fmadd_where(lane[kDep * NH + h], ok, fac, dD[q]);
         // alpha = min(0.99, o e^-sigma): no gradient through the clamp. u = -dL/dsigma.
         const M free = ok & (falloff < max_alpha);
         const V u = free ? v_alpha * falloff : zero;

@@ -256,6 +256,25 @@ inline void max_into(T& out, const T& a, const T& b) {
   out = a > b ? a : b;
 }
 
+/// acc = ok ? acc + a b : acc lane by lane (fused where the target has FMA): one masked FMA with
+/// AVX-512, where GCC otherwise emits an FMA and a blend.
+template <class T, class M>
+inline void fmadd_where(T& acc, const M& ok, const T& a, const T& b) {
+  if constexpr (std::is_same_v<std::remove_cvref_t<decltype(a[0])>, float>) {
+#if defined(__AVX512F__)
+    if constexpr (sizeof(T) == 64) {
+      const __mmask16 k = __mmask16(lane_bits(ok));
+      acc = std::bit_cast<T>(
+          _mm512_mask3_fmadd_ps(std::bit_cast<__m512>(a), std::bit_cast<__m512>(b), std::bit_cast<__m512>(acc), k));
+      return;
+    }
+#endif
+  }
+  T t;
+  fmadd_into(t, a, b, acc);
+  acc = ok ? t : acc;
+}
+
 /// out = exp(-s) for s >= 0, lane by lane: the Gaussian falloff of the blend
 /// stage. For float a branch-free Cephes-style polynomial (about 1 ulp; FMA where the target has it);
 /// the input is
