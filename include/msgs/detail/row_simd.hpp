@@ -293,13 +293,16 @@ inline void exp_neg_into(T& out, const T& s_in) {
   if constexpr (std::is_same_v<Lane, float>) {
     typedef std::int32_t IV __attribute__((vector_size(sizeof(T))));
     const T x = -s;
-    T c[9];
-    const float cs[9] = {-0.693359375f, 2.12194440e-4f,  1.9875691500e-4f, 1.3981999507e-3f, 8.3334519073e-3f,
-                         4.1665795894e-2f, 1.6666665459e-1f, 5.0000001201e-1f, 1.0f};
-    for (int k = 0; k < 9; ++k) broadcast(c[k], cs[k]);
+    T c[8];
+    const float cs[8] = {-0.693359375f, 2.12194440e-4f,  1.9875691500e-4f, 1.3981999507e-3f, 8.3334519073e-3f,
+                         4.1665795894e-2f, 1.6666665459e-1f, 5.0000001201e-1f};
+    for (int k = 0; k < 8; ++k) broadcast(c[k], cs[k]);
     // n = round(x / ln 2) by the 1.5 * 2^23 trick (exact in round-to-nearest, no libm call).
-    const float shifter = 12582912.0f;
-    const T n = (x * 1.44269504088896341f + shifter) - shifter;
+    T log2e, shift, n;
+    broadcast(log2e, 1.44269504088896341f);
+    broadcast(shift, 12582912.0f);
+    fmadd_into(n, x, log2e, shift);
+    n = n - shift;
     T r, p, y;
     fmadd_into(r, n, c[0], x);  // x - n ln 2 in two parts (Cody-Waite)
     fmadd_into(r, n, c[1], r);
@@ -309,10 +312,10 @@ inline void exp_neg_into(T& out, const T& s_in) {
     fmadd_into(p, p, r, c[6]);
     fmadd_into(p, p, r, c[7]);
     const T pr = p * r;
-    fmadd_into(y, pr, r, r);
-    y = y + c[8];
-    const IV e = (__builtin_convertvector(n, IV) + 127) << 23;
-    out = y * std::bit_cast<T>(e);
+    fmadd_into(y, pr, r, r);  // exp(r) - 1
+    // exp(x) = (y + 1) 2^n = y 2^n + 2^n: one FMA; 2^n is exact and x >= -87 keeps it normal.
+    const T scale = std::bit_cast<T>((__builtin_convertvector(n, IV) + 127) << 23);
+    fmadd_into(out, y, scale, scale);
   } else {
     T r = s;  // filled lane by lane from an initialised vector (GCC otherwise warns on `out`)
     for (int i = 0; i < int(sizeof(T) / sizeof(Lane)); ++i) r[i] = std::exp(-s[i]);
