@@ -8,6 +8,7 @@
 #include "reference_renderer.hpp"
 
 #include <cstdio>
+#include <cstring>
 #include <string>
 
 using namespace msgs;
@@ -207,4 +208,71 @@ TEST_CASE("1x1 image and very opaque scenes (early termination)") {
   sp.opacity_max = 0.999;  // above the 0.99 clamp
   check_scene<G>(test_camera<float>(1, 1, 0.5, 0.5, 1.0), sp, 61);
   check_scene<G>(test_camera<float>(40, 24, 20.0, 12.0), sp, 62);
+}
+
+// The vector helpers of the blend stage against scalar references (for the vector width this
+// build targets).
+
+TEST_CASE("exp_neg_into: within 2 ulp of exp on [0, 87]; negative -> 1, NaN -> exp(-87), huge -> exp(-87)") {
+  using V = detail::RowVec<float>::V;
+  constexpr int L = detail::RowVec<float>::kLanes;
+  double worst = 0;
+  for (int k = 0; k <= 870000; k += L) {
+    V s, e;
+    for (int i = 0; i < L; ++i) s[i] = float(k + i) * 1e-4f;
+    detail::exp_neg_into(e, s);
+    for (int i = 0; i < L; ++i) {
+      const double ref = std::exp(-double(s[i]));
+      if (s[i] <= 87.0f) worst = std::max(worst, std::abs(double(e[i]) - ref) / ref);
+    }
+  }
+  CHECK(worst < 2 * 5.97e-8);
+  V s, e;
+  for (int i = 0; i < L; ++i) s[i] = (i % 4 == 0) ? -3.0f : (i % 4 == 1) ? NAN : (i % 4 == 2) ? 1e30f : INFINITY;
+  detail::exp_neg_into(e, s);
+  for (int i = 0; i < L; ++i) {
+    CHECK(std::isfinite(e[i]));
+    if (i % 4 == 0) CHECK(e[i] == 1.0f);
+    else CHECK(e[i] == doctest::Approx(std::exp(-87.0)).epsilon(1e-6));
+  }
+}
+
+TEST_CASE("sum_rows, lane_bits, min_into and max_into match their scalar definitions") {
+  using RV = detail::RowVec<float>;
+  using V = RV::V;
+  using M = RV::M;
+  constexpr int NH = RV::kChunks, L = RV::kLanes;
+  // sum_rows: the documented tree (i + i+8, then i + i+4, then (0 + 2) + (1 + 3)), bit for bit.
+  for (int n = 1; n <= 13; ++n) {
+    std::vector<V> rows(std::size_t(n * NH));
+    for (int l = 0; l < n; ++l)
+      for (int x = 0; x < 16; ++x) rows[std::size_t(l * NH + x / L)][x % L] = std::ldexp(float(1 + 7 * l + 3 * x), -x) + 1e-3f * float(x);
+    std::vector<float> sum(static_cast<std::size_t>(n));
+    detail::sum_rows(rows.data(), n, sum.data());
+    for (int l = 0; l < n; ++l) {
+      float v[16];
+      for (int x = 0; x < 16; ++x) v[x] = rows[std::size_t(l * NH + x / L)][x % L];
+      float h8[8], h4[4];
+      for (int i = 0; i < 8; ++i) h8[i] = v[i] + v[i + 8];
+      for (int i = 0; i < 4; ++i) h4[i] = h8[i] + h8[i + 4];
+      const float ref = (h4[0] + h4[2]) + (h4[1] + h4[3]);
+      CHECK(std::memcmp(&ref, &sum[std::size_t(l)], sizeof ref) == 0);
+    }
+  }
+  V a, b, lo, hi;
+  M m;
+  for (int i = 0; i < L; ++i) {
+    a[i] = (i % 3 == 0) ? NAN : float(i) - 2.0f;
+    b[i] = float(L - i) - 3.0f;
+    m[i] = (i % 3 == 1) ? -1 : 0;
+  }
+  detail::min_into(lo, a, b);
+  detail::max_into(hi, a, b);
+  std::uint32_t bits_ref = 0;
+  for (int i = 0; i < L; ++i) {
+    CHECK(lo[i] == (a[i] < b[i] ? a[i] : b[i]));  // NaN in a -> b
+    CHECK(hi[i] == (a[i] > b[i] ? a[i] : b[i]));
+    bits_ref |= std::uint32_t(m[i] != 0) << i;
+  }
+  CHECK(detail::lane_bits(m) == bits_ref);
 }
