@@ -38,6 +38,12 @@ struct Image {
     width = w; height = h; channels = c;
     data.assign(static_cast<std::size_t>(w) * static_cast<std::size_t>(h) * static_cast<std::size_t>(c), fill);
   }
+  /// Set the shape without clearing: for a producer that writes every element (elements kept
+  /// from the old shape are stale, new ones zero).
+  void reshape(int w, int h, int c) {
+    width = w; height = h; channels = c;
+    data.resize(static_cast<std::size_t>(w) * static_cast<std::size_t>(h) * static_cast<std::size_t>(c));
+  }
 };
 
 }  // namespace msgs

@@ -333,9 +333,9 @@ class Rasterizer {
 
   void blend_all() {
     const int W = grid_.width, H = grid_.height;
-    image_.reset(W, H, count_);
-    alpha_.reset(W, H, 1);
-    if constexpr (Opt.depth) depth_image_.reset(W, H, 1);
+    image_.reshape(W, H, count_);  // the tiles cover every pixel: no clearing needed
+    alpha_.reshape(W, H, 1);
+    if constexpr (Opt.depth) depth_image_.reshape(W, H, 1);
     transmittance_.resize(std::size_t(W) * std::size_t(H));
     last_.resize(std::size_t(W) * std::size_t(H));
     BlendOutputs<S> out;
