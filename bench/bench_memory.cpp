@@ -6,7 +6,8 @@
 // allows), then the RSS added by each phase (model, adam state, forward, loss, backward, adam
 // step) and the sizes of the buffers that should dominate, computed from their element counts:
 // model/gradients/moments (N x 123 floats each), per-Gaussian rasterizer buffers, and the
-// per-intersection buffers (tile list, pair slots, chunk masks, gradient records).
+// per-intersection buffers (tile list, pair slots, row masks, gradient records). The rasterizer has
+// the trainer's options (absgrad on, as msgs::kTrainRaster in train.hpp).
 #include <benchmark/benchmark.h>
 
 #include <cstdlib>
@@ -66,7 +67,8 @@ void BM_TrainStepMemory(benchmark::State& state) {
   const Camera<float> cam = bench::family_camera<float>(spec);
   const Image<float> gt = bench::family_image_grad<float>(spec, count);  // a [0, 1) target image
 
-  Rasterizer<G, float> raster;
+  constexpr RasterOptions kTrainOptions{.absgrad = true};  // = msgs::kTrainRaster
+  Rasterizer<G, float, kTrainOptions> raster;
   Gradients<G, float> grads;
   Image<float> d_image;
   SsimWorkspace<float> ws;
@@ -101,14 +103,14 @@ void BM_TrainStepMemory(benchmark::State& state) {
   k["d_adam_step_MiB"] = rss_step;
   // Expected sizes from element counts.
   k["model_MiB"] = model_mib<G>(model.size());
-  k["grads_MiB"] = model_mib<G>(model.size()) + N * 2 * sizeof(float) / kMiB;  // + mean2d [N, 2] (absgrad off)
+  k["grads_MiB"] = model_mib<G>(model.size()) + N * 4 * sizeof(float) / kMiB;  // + mean2d, absgrad [N, 2]
   k["adam_moments_MiB"] = 2 * model_mib<G>(model.size());
   k["raster_per_gaussian_MiB"] =
       N * double(sizeof(Splat<float>) + count * sizeof(float) + sizeof(float) + sizeof(PixelRect) + 2 * sizeof(std::int32_t) + 1) / kMiB +
       V * (4 + 4 + 8) / kMiB;  // visible ids, depth order, pair offsets
   k["raster_per_intersection_MiB"] =
       M * double(sizeof(std::uint32_t) + sizeof(std::uint64_t) + sizeof(std::uint16_t)) / kMiB;  // tile_list, pair_slot, row_mask
-  k["grad_records_MiB"] = M * double(BlendRecord<false, false>::size(count)) * sizeof(float) / kMiB;
+  k["grad_records_MiB"] = M * double(BlendRecord<false, true>::size(count)) * sizeof(float) / kMiB;
   k["images_MiB"] = double(spec.width) * spec.height * (3 * count + 3) * sizeof(float) / kMiB;  // render, gt, d_image, alpha, T, last
   k["intersections"] = M;
   k["visible"] = V;

@@ -221,6 +221,12 @@ TEST_CASE("absgrad mode reads Gradients::absgrad, the default mode Gradients::me
   d.observe_gradients(1, 0, g, radii_all(1, 1), 100, 100);
   CHECK(a.stats().average(0, 0) == doctest::Approx(0.5));
   CHECK(d.stats().average(0, 0) == 0.0);
+  // A rasteriser without RasterOptions::absgrad leaves Gradients::absgrad empty: absgrad
+  // densification must say so instead of accumulating nothing.
+  g.absgrad.clear();
+  CHECK_THROWS_WITH_AS(a.observe_gradients(2, 0, g, radii_all(1, 1), 100, 100),
+                       doctest::Contains("RasterOptions{.absgrad = true}"), std::invalid_argument);
+  d.observe_gradients(2, 0, g, radii_all(1, 1), 100, 100);  // the default mode reads mean2d only
 }
 
 TEST_CASE("duplicate where the max scale is small, split where it is large, relative to the scene scale") {
