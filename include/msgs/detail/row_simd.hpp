@@ -57,29 +57,6 @@ inline void broadcast(V& v, S x) {
   v = Lane(x) - V{};
 }
 
-/// Is any lane of mask `m` set? (One test instruction on x86; a loop elsewhere.)
-template <class M>
-inline bool any_lane(const M& m) {
-#if defined(__AVX512F__)
-  if constexpr (sizeof(M) == 64) {
-    const __m512i v = std::bit_cast<__m512i>(m);
-    return _mm512_test_epi32_mask(v, v) != 0;
-  }
-#endif
-#if defined(__AVX__)
-  if constexpr (sizeof(M) == 32) {
-    const __m256i v = std::bit_cast<__m256i>(m);
-    return !_mm256_testz_si256(v, v);
-  }
-#endif
-#if defined(__SSE2__)
-  if constexpr (sizeof(M) == 16) return _mm_movemask_epi8(std::bit_cast<__m128i>(m)) != 0;
-#endif
-  bool any = false;
-  for (int i = 0; i < int(sizeof(M) / sizeof(m[0])); ++i) any = any || m[i] != 0;
-  return any;
-}
-
 /// Bit i set when lane i of mask `m` (all ones = true) is set: one instruction on x86.
 template <class M>
 inline std::uint32_t lane_bits(const M& m) {
@@ -107,6 +84,12 @@ inline std::uint32_t lane_bits(const M& m) {
   std::uint32_t bits = 0;
   for (int i = 0; i < n; ++i) bits |= std::uint32_t(m[i] != 0) << i;
   return bits;
+}
+
+/// Is any lane of mask `m` set?
+template <class M>
+inline bool any_lane(const M& m) {
+  return lane_bits(m) != 0;
 }
 
 /// out = |v| lane by lane (clears the sign bits).
