@@ -106,13 +106,24 @@ TEST_CASE("rasterizer is bitwise deterministic across thread counts and repeated
   omp_set_num_threads(saved);
 }
 
-TEST_CASE("absgrad off changes nothing but Gradients::absgrad (left empty)") {
-  const Camera<float> cam = test_camera<float>(96, 80, 50.0, 48.0, 40.0);
+namespace {
+
+/// The small camera and a random scene of `n` Gaussians on it, for the tests below.
+const Camera<float> kSmallCam = test_camera<float>(96, 80, 50.0, 48.0, 40.0);
+
+GaussianModel<G, float> small_scene(std::size_t n, std::uint64_t seed) {
   SceneParams sp;
-  sp.n = 1500;
+  sp.n = n;
   sp.log_scale_min = std::log(0.01);
   sp.log_scale_max = std::log(0.15);
-  const GaussianModel<G, float> m = random_scene<G, float>(cam, sp, 78);
+  return random_scene<G, float>(kSmallCam, sp, seed);
+}
+
+}  // namespace
+
+TEST_CASE("absgrad off changes nothing but Gradients::absgrad (left empty)") {
+  const Camera<float>& cam = kSmallCam;
+  const GaussianModel<G, float> m = small_scene(1500, 78);
   constexpr RasterOptions kNoAbs{.depth = true, .antialiased = true, .absgrad = false};
   Rasterizer<G, float, kNoAbs> off;
   R on;
@@ -130,12 +141,8 @@ TEST_CASE("a reused Gradients object carries nothing over from the previous back
   // The backward writes every gradient of a visible Gaussian and zeroes only the rest (culled
   // Gaussians, SH above the active degree): a second backward into the same object must give the
   // bits of a fresh one, also when the second frame culls what the first rendered.
-  const Camera<float> cam = test_camera<float>(96, 80, 50.0, 48.0, 40.0);
-  SceneParams sp;
-  sp.n = 1200;
-  sp.log_scale_min = std::log(0.01);
-  sp.log_scale_max = std::log(0.15);
-  const GaussianModel<G, float> m = random_scene<G, float>(cam, sp, 79);
+  const Camera<float>& cam = kSmallCam;
+  const GaussianModel<G, float> m = small_scene(1200, 79);
   Camera<float> shifted = cam;
   shifted.cx += 40.0f;  // a third of the scene leaves the view
   R r;

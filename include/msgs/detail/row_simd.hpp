@@ -182,62 +182,44 @@ inline void fmadd_into(T& out, const T& a, const T& b, const T& c) {
   out = a * b + c;
 }
 
-/// out = a < b ? a : b lane by lane (so b where either is NaN): one MINPS on x86, which GCC does
-/// not match from the generic form for vector-extension types.
-template <class T>
-inline void min_into(T& out, const T& a, const T& b) {
+/// out = Max ? (a > b ? a : b) : (a < b ? a : b) lane by lane (so b where either is NaN): one
+/// MAXPS/MINPS on x86, which GCC does not match from the generic form for vector-extension types.
+template <bool Max, class T>
+inline void min_or_max_into(T& out, const T& a, const T& b) {
   if constexpr (std::is_same_v<std::remove_cvref_t<decltype(a[0])>, float>) {
 #if defined(__AVX512F__)
     if constexpr (sizeof(T) == 64) {
-      // The masked form with a full mask: GCC 12's _mm512_min_ps trips -Wmaybe-uninitialized on
-      // its internal undefined pass-through operand.
-      const __m512 bb = std::bit_cast<__m512>(b);
-      out = std::bit_cast<T>(_mm512_mask_min_ps(bb, __mmask16(0xffff), std::bit_cast<__m512>(a), bb));
+      // The masked forms with a full mask: GCC 12's _mm512_min_ps/_mm512_max_ps trip
+      // -Wmaybe-uninitialized on their internal undefined pass-through operand.
+      const __m512 aa = std::bit_cast<__m512>(a), bb = std::bit_cast<__m512>(b);
+      const __mmask16 all = 0xffff;
+      out = std::bit_cast<T>(Max ? _mm512_mask_max_ps(bb, all, aa, bb) : _mm512_mask_min_ps(bb, all, aa, bb));
       return;
     }
 #endif
 #if defined(__AVX__)
     if constexpr (sizeof(T) == 32) {
-      out = std::bit_cast<T>(_mm256_min_ps(std::bit_cast<__m256>(a), std::bit_cast<__m256>(b)));
+      const __m256 aa = std::bit_cast<__m256>(a), bb = std::bit_cast<__m256>(b);
+      out = std::bit_cast<T>(Max ? _mm256_max_ps(aa, bb) : _mm256_min_ps(aa, bb));
       return;
     }
 #endif
 #if defined(__SSE2__)
     if constexpr (sizeof(T) == 16) {
-      out = std::bit_cast<T>(_mm_min_ps(std::bit_cast<__m128>(a), std::bit_cast<__m128>(b)));
+      const __m128 aa = std::bit_cast<__m128>(a), bb = std::bit_cast<__m128>(b);
+      out = std::bit_cast<T>(Max ? _mm_max_ps(aa, bb) : _mm_min_ps(aa, bb));
       return;
     }
 #endif
   }
-  out = a < b ? a : b;
+  if constexpr (Max) out = a > b ? a : b;
+  else out = a < b ? a : b;
 }
 
-/// out = a > b ? a : b lane by lane (so b where either is NaN): one MAXPS on x86.
 template <class T>
-inline void max_into(T& out, const T& a, const T& b) {
-  if constexpr (std::is_same_v<std::remove_cvref_t<decltype(a[0])>, float>) {
-#if defined(__AVX512F__)
-    if constexpr (sizeof(T) == 64) {
-      const __m512 bb = std::bit_cast<__m512>(b);
-      out = std::bit_cast<T>(_mm512_mask_max_ps(bb, __mmask16(0xffff), std::bit_cast<__m512>(a), bb));
-      return;
-    }
-#endif
-#if defined(__AVX__)
-    if constexpr (sizeof(T) == 32) {
-      out = std::bit_cast<T>(_mm256_max_ps(std::bit_cast<__m256>(a), std::bit_cast<__m256>(b)));
-      return;
-    }
-#endif
-#if defined(__SSE2__)
-    if constexpr (sizeof(T) == 16) {
-      out = std::bit_cast<T>(_mm_max_ps(std::bit_cast<__m128>(a), std::bit_cast<__m128>(b)));
-      return;
-    }
-#endif
-  }
-  out = a > b ? a : b;
-}
+inline void min_into(T& out, const T& a, const T& b) { min_or_max_into<false>(out, a, b); }
+template <class T>
+inline void max_into(T& out, const T& a, const T& b) { min_or_max_into<true>(out, a, b); }
 
 /// acc = ok ? acc + a b : acc lane by lane (fused where the target has FMA): one masked FMA with
 /// AVX-512, where GCC otherwise emits an FMA and a blend.
