@@ -26,13 +26,12 @@ struct ProjectConstants {
   static constexpr double kMinCompensation = 0.005; ///< floor of the antialiasing opacity factor
 };
 
-/// Camera in the double form the projection uses. The projection reads the plain arrays (`rot`,
-/// `trans`); the Eigen members are for callers.
+/// Camera in the double form the projection uses: world-to-camera rotation and translation as
+/// plain arrays, and the camera centre in world space (for view directions).
 struct ProjectCamera {
-  Eigen::Matrix3d R;
-  Eigen::Vector3d t, position;
   double rot[9];    ///< R, row-major
   double trans[3];  ///< t
+  Eigen::Vector3d position;  ///< -R^T t
   double fx, fy, cx, cy, near_plane, far_plane;
   int width, height;
   /// Tan-fov clamp limits of x/z and y/z (generalised for off-centre principal points).
@@ -41,12 +40,12 @@ struct ProjectCamera {
   template <class S>
   static ProjectCamera from(const Camera<S>& c) {
     ProjectCamera p;
-    p.R = c.R.template cast<double>();
-    p.t = c.t.template cast<double>();
-    p.position = -(p.R.transpose() * p.t);
+    const Eigen::Matrix3d R = c.R.template cast<double>();
+    const Eigen::Vector3d t = c.t.template cast<double>();
+    p.position = -(R.transpose() * t);
     for (int i = 0; i < 3; ++i) {
-      for (int j = 0; j < 3; ++j) p.rot[3 * i + j] = p.R(i, j);
-      p.trans[i] = p.t[i];
+      for (int j = 0; j < 3; ++j) p.rot[3 * i + j] = R(i, j);
+      p.trans[i] = t[i];
     }
     p.fx = double(c.fx); p.fy = double(c.fy); p.cx = double(c.cx); p.cy = double(c.cy);
     p.near_plane = double(c.near_plane); p.far_plane = double(c.far_plane);
