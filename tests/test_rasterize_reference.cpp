@@ -214,8 +214,8 @@ TEST_CASE("1x1 image and very opaque scenes (early termination)") {
 // build targets).
 
 TEST_CASE("exp_neg_into: within 2 ulp of exp on [0, 87]; negative -> 1, NaN -> exp(-87), huge -> exp(-87)") {
-  using V = detail::RowVec<float>::V;
-  constexpr int L = detail::RowVec<float>::kLanes;
+  using V = detail::BlockVec<float>::V;
+  constexpr int L = detail::BlockVec<float>::kLanes;
   double worst = 0;
   for (int k = 0; k <= 870000; k += L) {
     V s, e;
@@ -238,7 +238,7 @@ TEST_CASE("exp_neg_into: within 2 ulp of exp on [0, 87]; negative -> 1, NaN -> e
 }
 
 TEST_CASE("sum_rows, lane_bits, min_into and max_into match their scalar definitions") {
-  using RV = detail::RowVec<float>;
+  using RV = detail::BlockVec<float>;
   using V = RV::V;
   using M = RV::M;
   constexpr int NH = RV::kChunks, L = RV::kLanes;

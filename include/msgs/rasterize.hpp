@@ -117,7 +117,7 @@ class Rasterizer {
 #pragma omp parallel for schedule(dynamic, 2)
       for (int t = 0; t < tiles; ++t)
         blend_tile_bwd<S, C, kBands, Opt.depth, Opt.absgrad>(
-            in, t, transmittance_.data(), last_.data(), row_mask_.data(), gin, records_.data(),
+            in, t, transmittance_.data(), last_.data(), block_mask_.data(), gin, records_.data(),
             bg_partial_.data() + std::size_t(t) * std::size_t(count_));
     });
     grads.background.assign(std::size_t(count_), S(0));
@@ -344,8 +344,8 @@ class Rasterizer {
     if constexpr (Opt.depth) out.depth = depth_image_.data.data();
     out.transmittance = transmittance_.data();
     out.last = last_.data();
-    row_mask_.resize(bins_.pairs());
-    out.row_mask = row_mask_.data();
+    block_mask_.resize(bins_.pairs());
+    out.block_mask = block_mask_.data();
     std::uint64_t frags = 0;
     dispatch_channels([&]<int C>() {
       const BlendInputs<S> in = blend_inputs();
@@ -405,7 +405,7 @@ class Rasterizer {
   Image<S> image_, alpha_, depth_image_;
   std::vector<S> transmittance_;       // [H, W]
   std::vector<std::uint32_t> last_;    // [H, W]
-  std::vector<std::uint16_t> row_mask_;// [M] tile rows each intersection blended into
+  std::vector<std::uint16_t> block_mask_;// [M] tile blocks each intersection blended into
   std::uint64_t fragments_ = 0;
   std::vector<S> records_;             // [M, BlendRecord<depth, absgrad>::size(count)]
   std::vector<S> bg_partial_;          // [tiles, count]

@@ -1,6 +1,6 @@
 // include/msgs/detail/math.hpp
 // Scalar helpers of the projection (a stable sigmoid). The blend stage's vector helpers are in
-// row_simd.hpp.
+// block_simd.hpp.
 #pragma once
 
 #include <cmath>

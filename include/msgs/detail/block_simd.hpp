@@ -1,10 +1,10 @@
-// include/msgs/detail/row_simd.hpp
-// A tile row (16 pixels) as one or more vectors of the GCC/Clang vector extension, sized to the
-// target's widest registers (one 16-lane vector with AVX-512, two 8-lane with AVX/AVX2, four
+// include/msgs/detail/block_simd.hpp
+// A block of 16 pixels (4x4 of a tile, see blend.hpp) as one or more vectors of the GCC/Clang
+// vector extension, sized to the target's widest registers (one 16-lane vector with AVX-512, two 8-lane with AVX/AVX2, four
 // 4-lane with SSE or NEON), for the blend loops: element-wise IEEE arithmetic and selects, with no
 // reliance on the auto-vectoriser's if-conversion (which, under plain AVX2 or SSE, gives up on the
 // blend loop and runs it scalar, and under AVX-512 emits masked stores that the next load of the
-// same row cannot forward from).
+// same block cannot forward from).
 //
 // Helpers write their result through a reference instead of returning a vector: returning a
 // vector wider than the target's registers changes the calling convention and GCC warns (-Wpsabi).
@@ -21,8 +21,8 @@
 
 namespace msgs::detail {
 
-/// Pixels in a tile row.
-inline constexpr int kRowLanes = 16;
+/// Pixels in a block (the lanes the blend loops work on at once).
+inline constexpr int kBlockLanes = 16;
 
 /// Bytes of the widest vector registers of the target: 64 (AVX-512), 32 (AVX), else 16.
 #if defined(__AVX512F__)
@@ -33,14 +33,14 @@ inline constexpr int kVectorBytes = 32;
 inline constexpr int kVectorBytes = 16;
 #endif
 
-/// Vector types of a tile row in scalar S, kChunks vectors of kLanes lanes each: V (values),
+/// Vector types of a block in scalar S, kChunks vectors of kLanes lanes each: V (values),
 /// M (comparison masks: all ones = true, the signed integer type of S's width), U and I (32-bit
 /// unsigned / signed per lane: list positions, counts).
 template <class S>
-struct RowVec {
-  static constexpr int kLanes = kVectorBytes / int(sizeof(S)) < kRowLanes ? kVectorBytes / int(sizeof(S)) : kRowLanes;
-  static constexpr int kChunks = kRowLanes / kLanes;
-  static_assert(kChunks * kLanes == kRowLanes);
+struct BlockVec {
+  static constexpr int kLanes = kVectorBytes / int(sizeof(S)) < kBlockLanes ? kVectorBytes / int(sizeof(S)) : kBlockLanes;
+  static constexpr int kChunks = kBlockLanes / kLanes;
+  static_assert(kChunks * kLanes == kBlockLanes);
   using MaskScalar = std::conditional_t<sizeof(S) == 4, std::int32_t, std::int64_t>;
   typedef S V __attribute__((vector_size(kLanes * sizeof(S))));
   typedef MaskScalar M __attribute__((vector_size(kLanes * sizeof(S))));
@@ -116,13 +116,13 @@ inline void halve_to_four(const Vv& v, S* out4) {
   }
 }
 
-/// sum[l] = the sum of the 16 lanes of row l, stored as kChunks vectors at v[l * kChunks ...],
+/// sum[l] = the sum of the 16 lanes of group l (one block's worth of an accumulator), stored as kChunks vectors at v[l * kChunks ...],
 /// for l < n. The summation tree is fixed (lane i plus lane i + 8, then i + 4, then
-/// (0 + 2) + (1 + 3)), the same for every vector width, so a row sums to the same bits with
+/// (0 + 2) + (1 + 3)), the same for every vector width, so a group sums to the same bits with
 /// AVX-512, AVX or SSE.
 template <class S, class V>
 inline void sum_rows(const V* v, int n, S* sum) {
-  constexpr int NH = RowVec<S>::kChunks, L = RowVec<S>::kLanes;
+  constexpr int NH = BlockVec<S>::kChunks, L = BlockVec<S>::kLanes;
   if constexpr (L == 16 && NH == 1) {
     // One 16-lane vector per row: reduce four rows at a time with shuffles that pack the partial
     // sums of different rows into one vector (the same tree, a third of the instructions).
