@@ -49,6 +49,15 @@ struct BlendConstants {
 
 namespace detail {
 
+/// Prefetches for writing the cache lines of the n elements at p.
+template <class T>
+inline void prefetch_for_write(T* p, std::size_t n) {
+  const char* b = reinterpret_cast<const char*>(p);
+  const char* e = reinterpret_cast<const char*>(p + n);
+  for (const char* c = b; c < e; c += 64) __builtin_prefetch(c, 1);
+  if (n > 0) __builtin_prefetch(e - 1, 1);
+}
+
 /// A 16x16 tile is processed as 4x4 blocks of 4x4 pixels, one block being 16 lanes (one
 /// BlockVec: one AVX-512 vector, two AVX or four SSE vectors). Splats are mostly a few pixels
 /// wide, and a square block wastes fewer lanes on them than a 16-pixel tile row: on the benchmark
@@ -250,6 +259,19 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
       for (int ch = 0; ch < NC; ++ch) acc[ch][q] = zero;
       if constexpr (Depth) dacc[q] = zero;
     }
+  // The output rows of the tile are written at the end: fetch their cache lines for writing now,
+  // so that the stores then do not wait on them (the images of a frame exceed the L2 cache).
+  {
+    const int W = in.grid->width;
+    for (int y = 0; y < tb.h; ++y) {
+      const std::size_t pix = std::size_t(tb.y0 + y) * std::size_t(W) + std::size_t(tb.x0);
+      detail::prefetch_for_write(out.image + pix * std::size_t(nc), std::size_t(tb.w) * std::size_t(nc));
+      detail::prefetch_for_write(out.alpha + pix, std::size_t(tb.w));
+      detail::prefetch_for_write(out.transmittance + pix, std::size_t(tb.w));
+      detail::prefetch_for_write(out.last + pix, std::size_t(tb.w));
+      if constexpr (Depth) detail::prefetch_for_write(out.depth + pix, std::size_t(tb.w));
+    }
+  }
   // Blocks whose pixels have all stopped are skipped; the check runs every kCheckEvery splats so
   // that the hot loop carries no horizontal reductions.
   constexpr int kCheckEvery = 8;
