@@ -14,6 +14,7 @@
 
 #include <omp.h>
 
+#include <bit>
 #include <cstdlib>
 #include <memory>
 #include <string>
@@ -99,29 +100,52 @@ void bm_backward(benchmark::State& st, int size, int threads, RenderSettings<flo
   set_rates(st, r.fragments(), m.size());
 }
 
-/// The projection stage alone (project_fwd over every Gaussian, geometry only).
-void bm_project(benchmark::State& st, int size, int threads) {
+/// The projection stage alone (geometry only): kProjLanes Gaussians at a time as the rasteriser
+/// runs it (detail::project_lanes), or with `scalar` one at a time (project_fwd), for comparison.
+void bm_project(benchmark::State& st, int size, int threads, bool scalar) {
   using G = Gaussian<1, 0>;
+  using D = detail::ProjVec;
+  constexpr int L = detail::kProjLanes;
   omp_set_num_threads(threads);
   const SceneSpec spec = spec_of(size);
   const GaussianModel<G, float>& m = model_for<G>(size);
   const ProjectCamera pcam = ProjectCamera::from(bench::family_camera<float>(spec));
-  const std::int64_t n = std::int64_t(m.size());
-  std::vector<ProjectedGaussian> out(m.size());
+  const std::int64_t n = std::int64_t(m.size()) / L * L;  // whole batches
+  std::vector<ProjectedGaussian> out(scalar ? m.size() : 0);
+  std::vector<detail::ProjectedLanes<D>> out_lanes(scalar ? 0 : std::size_t(n / L));
   std::int64_t visible = 0;
   for (auto _ : st) {
     visible = 0;
+    if (scalar) {
 #pragma omp parallel for schedule(static) reduction(+ : visible)
-    for (std::int64_t i = 0; i < n; ++i) {
-      const std::size_t k = std::size_t(i);
-      GaussianGeometry g;
-      g.mean = Eigen::Vector3d(m.means[3 * k], m.means[3 * k + 1], m.means[3 * k + 2]);
-      g.log_scale = Eigen::Vector3d(m.log_scales[3 * k], m.log_scales[3 * k + 1], m.log_scales[3 * k + 2]);
-      g.quat = Eigen::Vector4d(m.quats[4 * k], m.quats[4 * k + 1], m.quats[4 * k + 2], m.quats[4 * k + 3]);
-      g.opacity_logit = m.opacity_logits[k];
-      visible += project_fwd<false>(g, pcam, out[k]) ? 1 : 0;
+      for (std::int64_t i = 0; i < n; ++i) {
+        const std::size_t k = std::size_t(i);
+        GaussianGeometry g;
+        g.mean = Eigen::Vector3d(m.means[3 * k], m.means[3 * k + 1], m.means[3 * k + 2]);
+        g.log_scale = Eigen::Vector3d(m.log_scales[3 * k], m.log_scales[3 * k + 1], m.log_scales[3 * k + 2]);
+        g.quat = Eigen::Vector4d(m.quats[4 * k], m.quats[4 * k + 1], m.quats[4 * k + 2], m.quats[4 * k + 3]);
+        g.opacity_logit = m.opacity_logits[k];
+        visible += project_fwd<false>(g, pcam, out[k]) ? 1 : 0;
+      }
+      benchmark::DoNotOptimize(out.data());
+    } else {
+#pragma omp parallel for schedule(static) reduction(+ : visible)
+      for (std::int64_t b = 0; b < n / L; ++b) {
+        detail::GeometryLanes<D> g;
+        for (int l = 0; l < L; ++l) {
+          const std::size_t k = std::size_t(b * L + l);
+          for (int c = 0; c < 3; ++c) {
+            g.mean[c][l] = m.means[3 * k + std::size_t(c)];
+            g.log_scale[c][l] = m.log_scales[3 * k + std::size_t(c)];
+          }
+          for (int c = 0; c < 4; ++c) g.quat[c][l] = m.quats[4 * k + std::size_t(c)];
+          g.opacity_logit[l] = m.opacity_logits[k];
+        }
+        const auto vis = detail::project_lanes<false>(g, pcam, out_lanes[std::size_t(b)], nullptr, false);
+        visible += std::popcount(detail::lane_bits(vis));
+      }
+      benchmark::DoNotOptimize(out_lanes.data());
     }
-    benchmark::DoNotOptimize(out.data());
   }
   st.counters["gaussians/s"] = benchmark::Counter(double(n), benchmark::Counter::kIsIterationInvariantRate);
   st.counters["visible"] = double(visible);
@@ -151,12 +175,13 @@ int main(int argc, char** argv) {
   const char* large = std::getenv("MSGS_BENCH_LARGE");
   const int sizes = (large && std::string(large) != "0") ? 3 : 2;
   for (int size = 0; size < sizes; ++size) {
-    for (int threads : {1, 2}) {
-      tune(benchmark::RegisterBenchmark(
-               (std::string("project/") + kSizes[size].name + "/threads:" + std::to_string(threads)).c_str(),
-               [=](benchmark::State& st) { bm_project(st, size, threads); }),
-           size);
-    }
+    for (int threads : {1, 2})
+      for (bool scalar : {false, true})
+        tune(benchmark::RegisterBenchmark((std::string(scalar ? "project_scalar/" : "project/") + kSizes[size].name +
+                                           "/threads:" + std::to_string(threads))
+                                              .c_str(),
+                                          [=](benchmark::State& st) { bm_project(st, size, threads, scalar); }),
+             size);
     for (int threads : {1, 2}) {
       register_type<Gaussian<1, 0>>("B1_SH0", size, threads);
       register_type<Gaussian<1, 3>>("B1_SH3", size, threads);

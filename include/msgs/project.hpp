@@ -1,16 +1,21 @@
 // include/msgs/project.hpp
 // Stage 1 of the rasteriser: project one 3D Gaussian to a 2D screen-space Gaussian (EWA splatting,
-// 3DGS/gsplat conventions) and its analytic backward, side by side. Internally double precision:
-// it is per-Gaussian work (cheap next to blending), and it keeps extreme scales finite.
+// 3DGS/gsplat conventions) and its analytic backward, side by side. Internally double precision,
+// which keeps extreme scales finite; the rasteriser projects a vector register's worth of
+// Gaussians at once (detail::project_lanes), the public project_fwd / project_bwd one at a time,
+// both to the same bits.
 #pragma once
 
 #include <Eigen/Core>
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstdint>
+#include <type_traits>
 
 #include "camera.hpp"
 #include "gaussian.hpp"
+#include "detail/block_simd.hpp"
 #include "detail/math.hpp"
 #include "sh.hpp"
 
@@ -87,20 +92,128 @@ struct ProjectedGaussian {
 namespace detail {
 
 // The projection works on plain row-major 3x3 arrays: written out, the small products compile to
-// straight-line scalar code, where Eigen's fixed-size packets stored element by element and
-// reloaded as vectors stall on store forwarding (the projection ran ~25% slower with them).
+// straight-line code, where Eigen's fixed-size packets stored element by element and reloaded as
+// vectors stall on store forwarding (the projection ran ~25% slower with them).
+//
+// Every function below is written once for a lane type D: double (one Gaussian) or ProjVec (a
+// vector of kProjLanes doubles, as many Gaussians at once: 8 with AVX-512, 4 with AVX, 2 with
+// SSE2). Lane by lane both compute the same IEEE operations (exp and log are libm's in both), so
+// a Gaussian projects to the same bits either way (tested). Culling becomes a lane mask; the
+// scalar form returns as soon as its one lane is culled, the vector form when all are. Culled
+// lanes of a vector compute on (possibly non-finite) garbage that is masked out.
+
+/// Doubles per projection vector.
+inline constexpr int kProjLanes = kVectorBytes / int(sizeof(double));
+typedef double ProjVec __attribute__((vector_size(kProjLanes * sizeof(double))));
+
+/// Masks, selects and the elementary functions for lane type D (see above).
+template <class D>
+struct Lanes;
+
+template <>
+struct Lanes<double> {
+  using M = bool;
+  static constexpr int kCount = 1;
+  static double splat(double x) { return x; }
+  static double sel(bool m, double a, double b) { return m ? a : b; }
+  static bool any(bool m) { return m; }
+  static bool all(bool m) { return m; }
+  static bool not_(bool m) { return !m; }
+  static double sqrt(double x) { return std::sqrt(x); }
+  static double exp(double x) { return std::exp(x); }
+  static double log(double x) { return std::log(x); }
+};
+
+template <>
+struct Lanes<ProjVec> {
+  using M = decltype(ProjVec{} < ProjVec{});  // the compiler's comparison type (long or long long lanes)
+  static constexpr int kCount = kProjLanes;
+  static ProjVec splat(double x) { return x - ProjVec{}; }
+  static ProjVec sel(const M& m, const ProjVec& a, const ProjVec& b) { return m ? a : b; }
+  static bool any(const M& m) { return lane_bits(m) != 0; }
+  static bool all(const M& m) { return lane_bits(m) == (1u << kCount) - 1u; }
+  static M not_(const M& m) { return ~m; }
+  static ProjVec sqrt(const ProjVec& x) {  // (kVectorBytes follows the same macros)
+#if defined(__AVX512F__)
+    // The masked form with a full mask: GCC 12's _mm512_sqrt_pd trips -Wmaybe-uninitialized on its
+    // internal undefined pass-through operand.
+    const __m512d v = std::bit_cast<__m512d>(x);
+    return std::bit_cast<ProjVec>(_mm512_mask_sqrt_pd(v, __mmask8(0xff), v));
+#elif defined(__AVX__)
+    return std::bit_cast<ProjVec>(_mm256_sqrt_pd(std::bit_cast<__m256d>(x)));
+#elif defined(__SSE2__)
+    return std::bit_cast<ProjVec>(_mm_sqrt_pd(std::bit_cast<__m128d>(x)));
+#else
+    ProjVec r = x;
+    for (int i = 0; i < kCount; ++i) r[i] = std::sqrt(x[i]);
+    return r;
+#endif
+  }
+  // libm lane by lane: the same correctly rounded-ish values as the scalar form, bit for bit.
+  static ProjVec exp(const ProjVec& x) {
+    ProjVec r = x;
+    for (int i = 0; i < kCount; ++i) r[i] = std::exp(x[i]);
+    return r;
+  }
+  static ProjVec log(const ProjVec& x) {
+    ProjVec r = x;
+    for (int i = 0; i < kCount; ++i) r[i] = std::log(x[i]);
+    return r;
+  }
+};
+
+/// Logical and / or of masks: && and || for one lane, & and | for vector masks.
+template <class M>
+inline M mand(const M& a, const M& b) {
+  if constexpr (std::is_same_v<M, bool>) return a && b;
+  else return a & b;
+}
+template <class M, class... R>
+inline M mand(const M& a, const M& b, const R&... rest) { return mand(mand(a, b), rest...); }
+template <class M>
+inline M mor(const M& a, const M& b) {
+  if constexpr (std::is_same_v<M, bool>) return a || b;
+  else return a | b;
+}
+template <class M, class... R>
+inline M mor(const M& a, const M& b, const R&... rest) { return mor(mor(a, b), rest...); }
+
+/// std::min, std::max and std::clamp, lane by lane with the same comparisons.
+template <class D>
+inline D lmin(const D& a, const D& b) { return Lanes<D>::sel(b < a, b, a); }
+template <class D>
+inline D lmax(const D& a, const D& b) { return Lanes<D>::sel(a < b, b, a); }
+template <class D>
+inline D lclamp(const D& v, double lo, double hi) {
+  using L = Lanes<D>;
+  return L::sel(v < L::splat(lo), L::splat(lo), L::sel(L::splat(hi) < v, L::splat(hi), v));
+}
+/// Finite (neither infinite nor NaN): x - x is 0 exactly then.
+template <class D>
+inline auto lfinite(const D& x) { return (x - x) == Lanes<D>::splat(0.0); }
+
+/// Numerically stable logistic function: 1 / (1 + e^-x) for x >= 0, e^x / (1 + e^x) below,
+/// with one exponential, e^-|x|, for both.
+template <class D>
+inline D lsigmoid(const D& x) {
+  using L = Lanes<D>;
+  const D e = L::exp(L::sel(x < L::splat(0.0), x, -x));
+  return L::sel(x >= L::splat(0.0), 1.0 / (1.0 + e), e / (1.0 + e));
+}
 
 /// Rotation matrix (row-major) of a unit quaternion (w, x, y, z).
-inline void quat_to_rotation(const double q[4], double R[9]) {
-  const double w = q[0], x = q[1], y = q[2], z = q[3];
+template <class D>
+inline void quat_to_rotation(const D q[4], D R[9]) {
+  const D w = q[0], x = q[1], y = q[2], z = q[3];
   R[0] = 1 - 2 * (y * y + z * z); R[1] = 2 * (x * y - w * z);     R[2] = 2 * (x * z + w * y);
   R[3] = 2 * (x * y + w * z);     R[4] = 1 - 2 * (x * x + z * z); R[5] = 2 * (y * z - w * x);
   R[6] = 2 * (x * z - w * y);     R[7] = 2 * (y * z + w * x);     R[8] = 1 - 2 * (x * x + y * y);
 }
 
 /// dL/dq for a unit quaternion q given dL/dR (row-major G).
-inline void quat_to_rotation_backward(const double q[4], const double G[9], double d[4]) {
-  const double w = q[0], x = q[1], y = q[2], z = q[3];
+template <class D>
+inline void quat_to_rotation_backward(const D q[4], const D G[9], D d[4]) {
+  const D w = q[0], x = q[1], y = q[2], z = q[3];
   auto g = [G](int i, int j) { return G[3 * i + j]; };
   d[0] = 2 * (-z * g(0, 1) + y * g(0, 2) + z * g(1, 0) - x * g(1, 2) - y * g(2, 0) + x * g(2, 1));
   d[1] = 2 * (y * g(0, 1) + z * g(0, 2) + y * g(1, 0) - 2 * x * g(1, 1) - w * g(1, 2) + z * g(2, 0) +
@@ -112,7 +225,8 @@ inline void quat_to_rotation_backward(const double q[4], const double G[9], doub
 }
 
 /// C = A B for row-major 3x3 matrices.
-inline void mul33(const double A[9], const double B[9], double C[9]) {
+template <class D, class DA>
+inline void mul33(const DA A[9], const D B[9], D C[9]) {
   MSGS_UNROLL
   for (int i = 0; i < 3; ++i)
     MSGS_UNROLL
@@ -120,81 +234,104 @@ inline void mul33(const double A[9], const double B[9], double C[9]) {
 }
 
 /// C = A^T B for row-major 3x3 matrices.
-inline void mul33_tn(const double A[9], const double B[9], double C[9]) {
+template <class D, class DA>
+inline void mul33_tn(const DA A[9], const D B[9], D C[9]) {
   MSGS_UNROLL
   for (int i = 0; i < 3; ++i)
     MSGS_UNROLL
     for (int j = 0; j < 3; ++j) C[3 * i + j] = A[i] * B[j] + A[3 + i] * B[3 + j] + A[6 + i] * B[6 + j];
 }
 
-/// Intermediate values of the projection that the backward pass reuses.
-struct ProjectionCache {
-  double qhat[4];          // normalised quaternion
-  double qnorm;
-  double scale[3];         // exp(clamped log-scale)
-  double scale_active[3];  // 1 where the log-scale was not clamped
-  double Rq[9];            // rotation of the Gaussian (row-major)
-  double WM[9];            // W Rq diag(scale): Sigma_cam = WM WM^T
-  double tcam[3];          // camera-space mean
-  double inv_tz;           // 1 / tcam[2]
-  double txz, tyz;         // tx / tz, ty / tz before clamping
-  double J00, J02, J11, J12;  // EWA Jacobian [[J00, 0, J02], [0, J11, J12]]
-  double cov2d[3];         // before dilation: xx, xy, yy
-  double blur[3];          // after dilation
-  double det_blur, det_orig;
-  double compensation;     // antialiasing factor (1 when disabled)
-  bool compensation_floored;
-  double sig;              // sigmoid(logit)
+/// A Gaussian's geometry parameters in lane type D.
+template <class D>
+struct GeometryLanes {
+  D mean[3], log_scale[3], quat[4], opacity_logit;
 };
 
-}  // namespace detail
+/// The forward result in lane type D (see ProjectedGaussian); `visible` is the lane mask.
+template <class D>
+struct ProjectedLanes {
+  typename Lanes<D>::M visible;
+  D mean2d[2], conic[3], depth, opacity, extent[2], support;
+};
 
-/// Project one Gaussian. Returns false (and `out.visible = false`) when the Gaussian is culled:
-/// non-finite parameters, degenerate quaternion, outside (near, far], invisible opacity,
-/// degenerate screen covariance, or entirely off-screen. `Antialiased` multiplies the opacity by
-/// sqrt(det cov2d / det(cov2d + 0.3 I)) (floored at 0.005), gsplat's antialiased mode.
-/// `known_visible` (with `cache_out`, for a backward pass of a Gaussian its forward found visible
-/// with the same inputs): skip the screen-extent tests, which could only pass again; `out.extent`
-/// and `out.support` are then not set.
-template <bool Antialiased>
-inline bool project_fwd(const GaussianGeometry& g, const ProjectCamera& cam, ProjectedGaussian& out,
-                        detail::ProjectionCache* cache_out = nullptr, bool known_visible = false) {
+/// Screen-space gradients in lane type D (see ProjectedGrad).
+template <class D>
+struct ProjectedGradLanes {
+  D mean2d[2], conic[3], opacity, depth;
+};
+
+/// Geometry gradients in lane type D (see GeometryGrad).
+template <class D>
+struct GeometryGradLanes {
+  D mean[3], log_scale[3], quat[4], opacity_logit;
+};
+
+/// Intermediate values of the projection that the backward pass reuses.
+template <class D>
+struct ProjectionCacheLanes {
+  D qhat[4];          // normalised quaternion
+  D qnorm;
+  D scale[3];         // exp(clamped log-scale)
+  D scale_active[3];  // 1 where the log-scale was not clamped
+  D Rq[9];            // rotation of the Gaussian (row-major)
+  D WM[9];            // W Rq diag(scale): Sigma_cam = WM WM^T
+  D tcam[3];          // camera-space mean
+  D inv_tz;           // 1 / tcam[2]
+  D txz, tyz;         // tx / tz, ty / tz before clamping
+  D J00, J02, J11, J12;  // EWA Jacobian [[J00, 0, J02], [0, J11, J12]]
+  D cov2d[3];         // before dilation: xx, xy, yy
+  D blur[3];          // after dilation
+  D det_blur, det_orig;
+  D compensation;     // antialiasing factor (1 when disabled)
+  typename Lanes<D>::M compensation_floored;
+  D sig;              // sigmoid(logit)
+};
+using ProjectionCache = ProjectionCacheLanes<double>;
+
+/// project_fwd in lane type D; returns the visible mask (also out.visible). See project_fwd.
+template <bool Antialiased, class D>
+inline typename Lanes<D>::M project_lanes(const GeometryLanes<D>& g, const ProjectCamera& cam, ProjectedLanes<D>& out,
+                                          std::type_identity_t<ProjectionCacheLanes<D>>* cache_out,
+                                          bool known_visible) {
   using PC = ProjectConstants;
-  out.visible = false;
-  const double mean[3] = {g.mean[0], g.mean[1], g.mean[2]};
-  const double ls[3] = {g.log_scale[0], g.log_scale[1], g.log_scale[2]};
-  const double quat[4] = {g.quat[0], g.quat[1], g.quat[2], g.quat[3]};
-  {
-    bool finite = std::isfinite(g.opacity_logit);
-    MSGS_UNROLL
-    for (int i = 0; i < 3; ++i) finite = finite && std::isfinite(mean[i]) && std::isfinite(ls[i]);
-    MSGS_UNROLL
-    for (int i = 0; i < 4; ++i) finite = finite && std::isfinite(quat[i]);
-    if (!finite) return false;
-  }
-  detail::ProjectionCache c;
+  using L = Lanes<D>;
+  using M = typename L::M;
+  const D zero = L::splat(0.0);
+  M alive = lfinite(g.opacity_logit);
+  MSGS_UNROLL
+  for (int i = 0; i < 3; ++i) alive = mand(alive, lfinite(g.mean[i]), lfinite(g.log_scale[i]));
+  MSGS_UNROLL
+  for (int i = 0; i < 4; ++i) alive = mand(alive, lfinite(g.quat[i]));
+  out.visible = alive;
+  if (!L::any(alive)) return alive;
+  ProjectionCacheLanes<D> c;
   const double* W = cam.rot;
   MSGS_UNROLL
   for (int i = 0; i < 3; ++i)
-    c.tcam[i] = ((W[3 * i] * mean[0] + W[3 * i + 1] * mean[1]) + W[3 * i + 2] * mean[2]) + cam.trans[i];
-  const double tz = c.tcam[2];
-  if (!(tz > cam.near_plane) || tz > cam.far_plane) return false;
+    c.tcam[i] = ((W[3 * i] * g.mean[0] + W[3 * i + 1] * g.mean[1]) + W[3 * i + 2] * g.mean[2]) + cam.trans[i];
+  const D tz = c.tcam[2];
+  alive = mand(alive, tz > L::splat(cam.near_plane), L::not_(tz > L::splat(cam.far_plane)));
+  if (!L::any(alive)) return out.visible = alive;
 
-  c.qnorm = std::sqrt(quat[0] * quat[0] + quat[1] * quat[1] + quat[2] * quat[2] + quat[3] * quat[3]);
-  if (!(c.qnorm >= PC::kMinQuatNorm)) return false;
-  const double inv_qnorm = 1.0 / c.qnorm;  // divisions are the projection's slowest operations
+  const D* quat = g.quat;
+  c.qnorm = L::sqrt(quat[0] * quat[0] + quat[1] * quat[1] + quat[2] * quat[2] + quat[3] * quat[3]);
+  alive = mand(alive, c.qnorm >= L::splat(PC::kMinQuatNorm));
+  if (!L::any(alive)) return out.visible = alive;
+  const D inv_qnorm = 1.0 / c.qnorm;  // divisions are the projection's slowest operations
   MSGS_UNROLL
   for (int i = 0; i < 4; ++i) c.qhat[i] = quat[i] * inv_qnorm;
 
-  c.sig = detail::sigmoid(g.opacity_logit);
-  if (!(c.sig >= PC::kMinAlpha)) return false;
+  c.sig = lsigmoid(g.opacity_logit);
+  alive = mand(alive, c.sig >= L::splat(PC::kMinAlpha));
+  if (!L::any(alive)) return out.visible = alive;
 
   c.inv_tz = 1.0 / tz;
   c.txz = c.tcam[0] * c.inv_tz;
   c.tyz = c.tcam[1] * c.inv_tz;
-  const double txc = std::min(cam.lim_x_pos, std::max(-cam.lim_x_neg, c.txz));
-  const double tyc = std::min(cam.lim_y_pos, std::max(-cam.lim_y_neg, c.tyz));
-  const double mean_x = cam.fx * c.txz + cam.cx, mean_y = cam.fy * c.tyz + cam.cy;
+  const D txc = lmin(L::splat(cam.lim_x_pos), lmax(L::splat(-cam.lim_x_neg), c.txz));
+  const D tyc = lmin(L::splat(cam.lim_y_pos), lmax(L::splat(-cam.lim_y_neg), c.tyz));
+  const D mean_x = cam.fx * c.txz + cam.cx, mean_y = cam.fy * c.tyz + cam.cy;
 
   // Far off-screen? Most Gaussians of a large scene are outside any one view, so bound the screen
   // extent before building the covariance: cov2d(0,0) = j0^T cov_cam j0 <= s_max^2 |j0|^2 with
@@ -202,34 +339,36 @@ inline bool project_fwd(const GaussianGeometry& g, const ProjectCamera& cam, Pro
   // A Gaussian culled here is one the exact test below would cull too, so the backward (which
   // recomputes the projection of a Gaussian it knows to be visible, with cache_out set) skips it.
   // Without antialiasing the opacity is sig, so kb is also the extent's factor below.
-  double kb = -1.0, log_sig = 0.0;
+  D kb = L::splat(-1.0), log_sig = zero;
   if (!cache_out) {
-    const double ls_max = std::max(ls[0], std::max(ls[1], ls[2]));
-    const double smax = std::exp(std::clamp(ls_max, -PC::kLogScaleClamp, PC::kLogScaleClamp));
-    log_sig = std::log(c.sig / PC::kMinAlpha);
-    kb = std::sqrt(std::max(0.0, 2.0 * log_sig));
-    const double sx = smax * cam.fx * c.inv_tz, sy = smax * cam.fy * c.inv_tz;
-    const double bx = kb * std::sqrt(sx * sx * (1.0 + txc * txc) + PC::kDilation) * (1.0 + 1e-6) + 1e-6;
-    const double by = kb * std::sqrt(sy * sy * (1.0 + tyc * tyc) + PC::kDilation) * (1.0 + 1e-6) + 1e-6;
-    if (mean_x + bx < -1.0 || mean_x - bx > cam.width + 1.0 || mean_y + by < -1.0 || mean_y - by > cam.height + 1.0)
-      return false;
+    const D ls_max = lmax(g.log_scale[0], lmax(g.log_scale[1], g.log_scale[2]));
+    const D smax = L::exp(lclamp(ls_max, -PC::kLogScaleClamp, PC::kLogScaleClamp));
+    log_sig = L::log(c.sig / PC::kMinAlpha);
+    kb = L::sqrt(lmax(zero, 2.0 * log_sig));
+    const D sx = smax * cam.fx * c.inv_tz, sy = smax * cam.fy * c.inv_tz;
+    const D bx = kb * L::sqrt(sx * sx * (1.0 + txc * txc) + PC::kDilation) * (1.0 + 1e-6) + 1e-6;
+    const D by = kb * L::sqrt(sy * sy * (1.0 + tyc * tyc) + PC::kDilation) * (1.0 + 1e-6) + 1e-6;
+    const M off = mor(mean_x + bx < L::splat(-1.0), mean_x - bx > L::splat(cam.width + 1.0),
+                      mean_y + by < L::splat(-1.0), mean_y - by > L::splat(cam.height + 1.0));
+    alive = mand(alive, L::not_(off));
+    if (!L::any(alive)) return out.visible = alive;
   }
 
   MSGS_UNROLL
   for (int i = 0; i < 3; ++i) {
-    const double cl = std::clamp(ls[i], -PC::kLogScaleClamp, PC::kLogScaleClamp);
-    c.scale_active[i] = (ls[i] == cl) ? 1.0 : 0.0;
-    c.scale[i] = std::exp(cl);
+    const D cl = lclamp(g.log_scale[i], -PC::kLogScaleClamp, PC::kLogScaleClamp);
+    c.scale_active[i] = L::sel(g.log_scale[i] == cl, L::splat(1.0), zero);
+    c.scale[i] = L::exp(cl);
   }
-  detail::quat_to_rotation(c.qhat, c.Rq);
+  quat_to_rotation(c.qhat, c.Rq);
   // WM = W Rq diag(scale); cov_cam = W Sigma W^T = WM WM^T.
   {
-    double M[9];
+    D Mx[9];
     MSGS_UNROLL
     for (int i = 0; i < 3; ++i)
       MSGS_UNROLL
-      for (int j = 0; j < 3; ++j) M[3 * i + j] = c.Rq[3 * i + j] * c.scale[j];
-    detail::mul33(W, M, c.WM);
+      for (int j = 0; j < 3; ++j) Mx[3 * i + j] = c.Rq[3 * i + j] * c.scale[j];
+    mul33(W, Mx, c.WM);
   }
 
   // EWA Jacobian with the generalised tan-fov clamp.
@@ -239,7 +378,7 @@ inline bool project_fwd(const GaussianGeometry& g, const ProjectCamera& cam, Pro
   c.J11 = cam.fy * c.inv_tz;
   c.J12 = -c.J11 * tyc;
   // cov2d = J cov_cam J^T = (J WM)(J WM)^T, with J's zeros skipped; symmetric by construction.
-  double T0[3], T1[3];
+  D T0[3], T1[3];
   MSGS_UNROLL
   for (int j = 0; j < 3; ++j) {
     T0[j] = c.J00 * c.WM[j] + c.J02 * c.WM[6 + j];
@@ -252,22 +391,24 @@ inline bool project_fwd(const GaussianGeometry& g, const ProjectCamera& cam, Pro
   c.blur[1] = c.cov2d[1];
   c.blur[2] = c.cov2d[2] + PC::kDilation;
   c.det_blur = c.blur[0] * c.blur[2] - c.blur[1] * c.blur[1];
-  if (!(c.det_blur > 0) || !std::isfinite(c.det_blur)) return false;
+  alive = mand(alive, c.det_blur > zero, lfinite(c.det_blur));
+  if (!L::any(alive)) return out.visible = alive;
 
-  c.compensation = 1.0;
-  c.compensation_floored = false;
+  c.compensation = L::splat(1.0);
+  c.compensation_floored = M{};
   c.det_orig = c.cov2d[0] * c.cov2d[2] - c.cov2d[1] * c.cov2d[1];
   if constexpr (Antialiased) {
-    const double comp = std::sqrt(std::max(0.0, c.det_orig / c.det_blur));
-    c.compensation_floored = !(comp > PC::kMinCompensation);
-    c.compensation = c.compensation_floored ? PC::kMinCompensation : comp;
+    const D comp = L::sqrt(lmax(zero, c.det_orig / c.det_blur));
+    c.compensation_floored = L::not_(comp > L::splat(PC::kMinCompensation));
+    c.compensation = L::sel(c.compensation_floored, L::splat(PC::kMinCompensation), comp);
   }
-  const double opacity = c.sig * c.compensation;
-  if (!(opacity >= PC::kMinAlpha)) return false;
+  const D opacity = c.sig * c.compensation;
+  alive = mand(alive, opacity >= L::splat(PC::kMinAlpha));
+  if (!L::any(alive)) return out.visible = alive;
 
   out.mean2d[0] = mean_x;
   out.mean2d[1] = mean_y;
-  const double inv_det = 1.0 / c.det_blur;
+  const D inv_det = 1.0 / c.det_blur;
   out.conic[0] = c.blur[2] * inv_det;
   out.conic[1] = -c.blur[1] * inv_det;
   out.conic[2] = c.blur[0] * inv_det;
@@ -276,21 +417,169 @@ inline bool project_fwd(const GaussianGeometry& g, const ProjectCamera& cam, Pro
   if (!(cache_out && known_visible)) {
     // alpha >= 1/255  <=>  sigma <= ln(255 o): the exact support, no 3-sigma cut-off, so the tiled
     // renderer paints exactly what a per-pixel loop over all Gaussians would.
-    const bool reuse = !Antialiased && kb >= 0.0;  // opacity == sig: the pre-test's values hold
-    out.support = reuse ? log_sig : std::log(opacity / PC::kMinAlpha);
-    const double k = reuse ? kb : std::sqrt(std::max(0.0, 2.0 * out.support));
-    out.extent[0] = k * std::sqrt(c.blur[0]);
-    out.extent[1] = k * std::sqrt(c.blur[2]);
-    if (!std::isfinite(out.mean2d[0]) || !std::isfinite(out.mean2d[1]) || !std::isfinite(out.extent[0]) ||
-        !std::isfinite(out.extent[1]))
-      return false;
+    const bool reuse = !Antialiased && !cache_out;  // opacity == sig: the pre-test's values hold
+    out.support = reuse ? log_sig : L::log(opacity / PC::kMinAlpha);
+    const D k = reuse ? kb : L::sqrt(lmax(zero, 2.0 * out.support));
+    out.extent[0] = k * L::sqrt(c.blur[0]);
+    out.extent[1] = k * L::sqrt(c.blur[2]);
+    alive = mand(alive, lfinite(out.mean2d[0]), lfinite(out.mean2d[1]), lfinite(out.extent[0]), lfinite(out.extent[1]));
     // Entirely off-screen (with a pixel of margin)?
-    if (out.mean2d[0] + out.extent[0] < -1.0 || out.mean2d[0] - out.extent[0] > cam.width + 1.0 ||
-        out.mean2d[1] + out.extent[1] < -1.0 || out.mean2d[1] - out.extent[1] > cam.height + 1.0)
-      return false;
+    const M off = mor(out.mean2d[0] + out.extent[0] < L::splat(-1.0), out.mean2d[0] - out.extent[0] > L::splat(cam.width + 1.0),
+                      out.mean2d[1] + out.extent[1] < L::splat(-1.0), out.mean2d[1] - out.extent[1] > L::splat(cam.height + 1.0));
+    alive = mand(alive, L::not_(off));
   }
-  out.visible = true;
-  if (cache_out) *cache_out = c;
+  out.visible = alive;
+  if (cache_out && L::any(alive)) *cache_out = c;
+  return alive;
+}
+
+/// project_bwd in lane type D: accumulates into `grad` the gradients of the lanes that project
+/// (the others are left as they are). See project_bwd.
+template <bool Antialiased, class D>
+inline void project_bwd_lanes(const GeometryLanes<D>& g, const ProjectCamera& cam, const ProjectedGradLanes<D>& v,
+                              GeometryGradLanes<D>& grad, bool known_visible) {
+  using L = Lanes<D>;
+  using M = typename L::M;
+  const D zero = L::splat(0.0);
+  ProjectedLanes<D> out{};  // (both set whenever a lane projects; initialised for the compiler's sake)
+  ProjectionCacheLanes<D> c{};
+  const M alive = project_lanes<Antialiased>(g, cam, out, &c, known_visible);
+  if (!L::any(alive)) return;
+  const double* W = cam.rot;
+  // Gradients of culled lanes (only with vectors; the scalar form returned above) are dropped.
+  auto add = [&](D& acc, const D& d) {
+    if constexpr (std::is_same_v<D, double>) acc += d;
+    else acc += L::sel(alive, d, zero);
+  };
+
+  // Opacity: o = sigmoid(logit) * compensation.
+  add(grad.opacity_logit, v.opacity * c.compensation * c.sig * (1.0 - c.sig));
+
+  // Conic Q = inverse(cov2d_blur): dL/dCov = -Q dL/dQ Q with Q symmetric; b appears twice in Q,
+  // so dL/dQ has b's gradient halved off the diagonal. G = v_cov is the gradient w.r.t.
+  // cov2d_blur as a full 2x2 matrix [[G00, G01], [G10, G11]].
+  const D qa = out.conic[0], qb = out.conic[1], qc = out.conic[2];
+  const D va = v.conic[0], vb = 0.5 * v.conic[1], vc = v.conic[2];
+  const D P00 = qa * va + qb * vb, P01 = qa * vb + qb * vc, P10 = qb * va + qc * vb, P11 = qb * vb + qc * vc;
+  D G00 = -(P00 * qa + P01 * qb), G01 = -(P00 * qb + P01 * qc);
+  D G10 = -(P10 * qa + P11 * qb), G11 = -(P10 * qb + P11 * qc);
+
+  if constexpr (Antialiased) {
+    // compensation = sqrt(det_orig / det_blur); d det(A)/dA = det(A) A^{-T} = adj(A)^T.
+    // No gradient where the compensation is floored.
+    const D v_comp = L::sel(c.compensation_floored, zero, v.opacity * c.sig);
+    const D r = c.det_orig / c.det_blur;
+    const D v_r = L::sel(c.compensation_floored, zero, v_comp * 0.5 / L::sqrt(r));
+    // r depends on cov2d through both determinants (cov2d_blur = cov2d + 0.3 I).
+    const D k_orig = v_r / c.det_blur, k_blur = v_r * c.det_orig / (c.det_blur * c.det_blur);
+    G00 += k_orig * c.cov2d[2] - k_blur * c.blur[2];
+    G11 += k_orig * c.cov2d[0] - k_blur * c.blur[0];
+    G01 += -k_orig * c.cov2d[1] + k_blur * c.blur[1];
+    G10 += -k_orig * c.cov2d[1] + k_blur * c.blur[1];
+  }
+
+  // cov2d = J C J^T with C = WM WM^T  ->  dL/dC = J^T G J, dL/dJ = 2 G J C (G, C symmetric).
+  // GJ = G J (2x3), J = [[J00, 0, J02], [0, J11, J12]].
+  const D GJ[2][3] = {{G00 * c.J00, G01 * c.J11, G00 * c.J02 + G01 * c.J12},
+                      {G10 * c.J00, G11 * c.J11, G10 * c.J02 + G11 * c.J12}};
+  // v_cc2 = 2 v_cov_cam = 2 J^T GJ (3x3, row-major); the 2 is the one of dL/dM below.
+  const D Jcol[3][2] = {{c.J00, zero}, {zero, c.J11}, {c.J02, c.J12}};  // column i of J
+  D v_cc2[9];
+  MSGS_UNROLL
+  for (int i = 0; i < 3; ++i)
+    MSGS_UNROLL
+    for (int j = 0; j < 3; ++j) v_cc2[3 * i + j] = 2.0 * (Jcol[i][0] * GJ[0][j] + Jcol[i][1] * GJ[1][j]);
+  // C = WM WM^T; v_J = 2 GJ C, needed at (0,0), (0,2), (1,1), (1,2).
+  D C[9];
+  MSGS_UNROLL
+  for (int i = 0; i < 3; ++i)
+    MSGS_UNROLL
+    for (int j = 0; j < 3; ++j)
+      C[3 * i + j] = c.WM[3 * i] * c.WM[3 * j] + c.WM[3 * i + 1] * c.WM[3 * j + 1] + c.WM[3 * i + 2] * c.WM[3 * j + 2];
+  auto v_J = [&](int a, int j) { return 2.0 * (GJ[a][0] * C[j] + GJ[a][1] * C[3 + j] + GJ[a][2] * C[6 + j]); };
+  const D vJ00 = v_J(0, 0), vJ02 = v_J(0, 2), vJ11 = v_J(1, 1), vJ12 = v_J(1, 2);
+
+  // J entries -> camera-space mean (clamped components only depend on tz).
+  D v_t[3] = {zero, zero, zero};
+  const D iz = c.inv_tz, iz2 = iz * iz, iz3 = iz2 * iz;
+  v_t[2] += -cam.fx * iz2 * vJ00 - cam.fy * iz2 * vJ11;
+  const M x_clamped = mor(c.txz > L::splat(cam.lim_x_pos), c.txz < L::splat(-cam.lim_x_neg));
+  const M y_clamped = mor(c.tyz > L::splat(cam.lim_y_pos), c.tyz < L::splat(-cam.lim_y_neg));
+  {
+    const D Lx = lmin(L::splat(cam.lim_x_pos), lmax(L::splat(-cam.lim_x_neg), c.txz));
+    // clamped: J02 = -fx L / tz depends on tz only; else on tx and tz.
+    v_t[2] += L::sel(x_clamped, cam.fx * Lx * iz2 * vJ02, 2.0 * cam.fx * c.tcam[0] * iz3 * vJ02);
+    v_t[0] += L::sel(x_clamped, zero, -cam.fx * iz2 * vJ02);
+    const D Ly = lmin(L::splat(cam.lim_y_pos), lmax(L::splat(-cam.lim_y_neg), c.tyz));
+    v_t[2] += L::sel(y_clamped, cam.fy * Ly * iz2 * vJ12, 2.0 * cam.fy * c.tcam[1] * iz3 * vJ12);
+    v_t[1] += L::sel(y_clamped, zero, -cam.fy * iz2 * vJ12);
+  }
+  // Projected mean (unclamped).
+  v_t[0] += cam.fx * iz * v.mean2d[0];
+  v_t[1] += cam.fy * iz * v.mean2d[1];
+  v_t[2] += -cam.fx * c.tcam[0] * iz2 * v.mean2d[0] - cam.fy * c.tcam[1] * iz2 * v.mean2d[1];
+  v_t[2] += v.depth;
+  MSGS_UNROLL
+  for (int i = 0; i < 3; ++i) add(grad.mean[i], W[i] * v_t[0] + W[3 + i] * v_t[1] + W[6 + i] * v_t[2]);
+
+  // cov_cam = W Sigma W^T; Sigma = M M^T with M = Rq diag(s):
+  // dL/dM = 2 W^T v_cov_cam W M = W^T (v_cc2 WM).
+  D X[9], v_M[9];
+  mul33(v_cc2, c.WM, X);
+  mul33_tn(W, X, v_M);
+  D v_Rq[9];
+  MSGS_UNROLL
+  for (int j = 0; j < 3; ++j) {
+    const D v_s = c.Rq[j] * v_M[j] + c.Rq[3 + j] * v_M[3 + j] + c.Rq[6 + j] * v_M[6 + j];
+    add(grad.log_scale[j], v_s * c.scale[j] * c.scale_active[j]);
+    MSGS_UNROLL
+    for (int i = 0; i < 3; ++i) v_Rq[3 * i + j] = v_M[3 * i + j] * c.scale[j];
+  }
+  D v_qhat[4];
+  quat_to_rotation_backward(c.qhat, v_Rq, v_qhat);
+  const D qdot = c.qhat[0] * v_qhat[0] + c.qhat[1] * v_qhat[1] + c.qhat[2] * v_qhat[2] + c.qhat[3] * v_qhat[3];
+  const D inv_qnorm = 1.0 / c.qnorm;
+  MSGS_UNROLL
+  for (int i = 0; i < 4; ++i) add(grad.quat[i], (v_qhat[i] - c.qhat[i] * qdot) * inv_qnorm);
+}
+
+/// One Gaussian's geometry as one lane.
+inline GeometryLanes<double> geometry_lanes(const GaussianGeometry& g) {
+  GeometryLanes<double> gl;
+  for (int i = 0; i < 3; ++i) {
+    gl.mean[i] = g.mean[i];
+    gl.log_scale[i] = g.log_scale[i];
+  }
+  for (int i = 0; i < 4; ++i) gl.quat[i] = g.quat[i];
+  gl.opacity_logit = g.opacity_logit;
+  return gl;
+}
+}  // namespace detail
+
+/// Project one Gaussian. Returns false (and `out.visible = false`) when the Gaussian is culled:
+/// non-finite parameters, degenerate quaternion, outside (near, far], invisible opacity,
+/// degenerate screen covariance, or entirely off-screen. `Antialiased` multiplies the opacity by
+/// sqrt(det cov2d / det(cov2d + 0.3 I)) (floored at 0.005), gsplat's antialiased mode.
+/// `known_visible` (with `cache_out`, for a backward pass of a Gaussian its forward found visible
+/// with the same inputs): skip the screen-extent tests, which could only pass again; `out.extent`
+/// and `out.support` are then not set. detail::project_lanes projects several Gaussians at once,
+/// to the same bits.
+template <bool Antialiased>
+inline bool project_fwd(const GaussianGeometry& g, const ProjectCamera& cam, ProjectedGaussian& out,
+                        detail::ProjectionCache* cache_out = nullptr, bool known_visible = false) {
+  detail::ProjectedLanes<double> o;
+  out.visible = detail::project_lanes<Antialiased>(detail::geometry_lanes(g), cam, o, cache_out, known_visible);
+  if (!out.visible) return false;
+  out.mean2d[0] = o.mean2d[0];
+  out.mean2d[1] = o.mean2d[1];
+  for (int i = 0; i < 3; ++i) out.conic[i] = o.conic[i];
+  out.depth = o.depth;
+  out.opacity = o.opacity;
+  if (!(cache_out && known_visible)) {
+    out.extent[0] = o.extent[0];
+    out.extent[1] = o.extent[1];
+    out.support = o.support;
+  }
   return true;
 }
 
@@ -313,109 +602,30 @@ struct GeometryGrad {
 /// Backward of project_fwd: accumulates into `grad` the gradient of the loss with respect to the
 /// Gaussian's parameters, given the gradients `v` of its screen-space quantities. `known_visible`:
 /// the caller's forward found this Gaussian visible with the same inputs (see project_fwd).
+/// detail::project_bwd_lanes does several Gaussians at once, to the same bits.
 template <bool Antialiased>
 inline void project_bwd(const GaussianGeometry& g, const ProjectCamera& cam, const ProjectedGrad& v,
                         GeometryGrad& grad, bool known_visible = false) {
-  ProjectedGaussian out;
-  detail::ProjectionCache c;
-  if (!project_fwd<Antialiased>(g, cam, out, &c, known_visible)) return;
-  const double* W = cam.rot;
-
-  // Opacity: o = sigmoid(logit) * compensation.
-  grad.opacity_logit += v.opacity * c.compensation * c.sig * (1.0 - c.sig);
-
-  // Conic Q = inverse(cov2d_blur): dL/dCov = -Q dL/dQ Q with Q symmetric; b appears twice in Q,
-  // so dL/dQ has b's gradient halved off the diagonal. G = v_cov is the gradient w.r.t.
-  // cov2d_blur as a full 2x2 matrix [[G00, G01], [G10, G11]].
-  const double qa = out.conic[0], qb = out.conic[1], qc = out.conic[2];
-  const double va = v.conic[0], vb = 0.5 * v.conic[1], vc = v.conic[2];
-  const double P00 = qa * va + qb * vb, P01 = qa * vb + qb * vc, P10 = qb * va + qc * vb, P11 = qb * vb + qc * vc;
-  double G00 = -(P00 * qa + P01 * qb), G01 = -(P00 * qb + P01 * qc);
-  double G10 = -(P10 * qa + P11 * qb), G11 = -(P10 * qb + P11 * qc);
-
-  if constexpr (Antialiased) {
-    if (!c.compensation_floored) {
-      // compensation = sqrt(det_orig / det_blur); d det(A)/dA = det(A) A^{-T} = adj(A)^T.
-      const double v_comp = v.opacity * c.sig;
-      const double r = c.det_orig / c.det_blur;
-      const double v_r = v_comp * 0.5 / std::sqrt(r);
-      // r depends on cov2d through both determinants (cov2d_blur = cov2d + 0.3 I).
-      const double k_orig = v_r / c.det_blur, k_blur = v_r * c.det_orig / (c.det_blur * c.det_blur);
-      G00 += k_orig * c.cov2d[2] - k_blur * c.blur[2];
-      G11 += k_orig * c.cov2d[0] - k_blur * c.blur[0];
-      G01 += -k_orig * c.cov2d[1] + k_blur * c.blur[1];
-      G10 += -k_orig * c.cov2d[1] + k_blur * c.blur[1];
-    }
+  detail::ProjectedGradLanes<double> vl;
+  vl.mean2d[0] = v.mean2d[0];
+  vl.mean2d[1] = v.mean2d[1];
+  for (int i = 0; i < 3; ++i) vl.conic[i] = v.conic[i];
+  vl.opacity = v.opacity;
+  vl.depth = v.depth;
+  detail::GeometryGradLanes<double> gg;
+  for (int i = 0; i < 3; ++i) {
+    gg.mean[i] = grad.mean[i];
+    gg.log_scale[i] = grad.log_scale[i];
   }
-
-  // cov2d = J C J^T with C = WM WM^T  ->  dL/dC = J^T G J, dL/dJ = 2 G J C (G, C symmetric).
-  // GJ = G J (2x3), J = [[J00, 0, J02], [0, J11, J12]].
-  const double GJ[2][3] = {{G00 * c.J00, G01 * c.J11, G00 * c.J02 + G01 * c.J12},
-                           {G10 * c.J00, G11 * c.J11, G10 * c.J02 + G11 * c.J12}};
-  // v_cc2 = 2 v_cov_cam = 2 J^T GJ (3x3, row-major); the 2 is the one of dL/dM below.
-  const double Jcol[3][2] = {{c.J00, 0.0}, {0.0, c.J11}, {c.J02, c.J12}};  // column i of J
-  double v_cc2[9];
-  MSGS_UNROLL
-  for (int i = 0; i < 3; ++i)
-    MSGS_UNROLL
-    for (int j = 0; j < 3; ++j) v_cc2[3 * i + j] = 2.0 * (Jcol[i][0] * GJ[0][j] + Jcol[i][1] * GJ[1][j]);
-  // C = WM WM^T; v_J = 2 GJ C, needed at (0,0), (0,2), (1,1), (1,2).
-  double C[9];
-  MSGS_UNROLL
-  for (int i = 0; i < 3; ++i)
-    MSGS_UNROLL
-    for (int j = 0; j < 3; ++j)
-      C[3 * i + j] = c.WM[3 * i] * c.WM[3 * j] + c.WM[3 * i + 1] * c.WM[3 * j + 1] + c.WM[3 * i + 2] * c.WM[3 * j + 2];
-  auto v_J = [&](int a, int j) { return 2.0 * (GJ[a][0] * C[j] + GJ[a][1] * C[3 + j] + GJ[a][2] * C[6 + j]); };
-  const double vJ00 = v_J(0, 0), vJ02 = v_J(0, 2), vJ11 = v_J(1, 1), vJ12 = v_J(1, 2);
-
-  // J entries -> camera-space mean (clamped components only depend on tz).
-  double v_t[3] = {0, 0, 0};
-  const double iz = c.inv_tz, iz2 = iz * iz, iz3 = iz2 * iz;
-  v_t[2] += -cam.fx * iz2 * vJ00 - cam.fy * iz2 * vJ11;
-  const bool x_clamped = c.txz > cam.lim_x_pos || c.txz < -cam.lim_x_neg;
-  const bool y_clamped = c.tyz > cam.lim_y_pos || c.tyz < -cam.lim_y_neg;
-  if (x_clamped) {
-    const double L = std::min(cam.lim_x_pos, std::max(-cam.lim_x_neg, c.txz));
-    v_t[2] += cam.fx * L * iz2 * vJ02;  // J02 = -fx L / tz
-  } else {
-    v_t[0] += -cam.fx * iz2 * vJ02;
-    v_t[2] += 2.0 * cam.fx * c.tcam[0] * iz3 * vJ02;
+  for (int i = 0; i < 4; ++i) gg.quat[i] = grad.quat[i];
+  gg.opacity_logit = grad.opacity_logit;
+  detail::project_bwd_lanes<Antialiased>(detail::geometry_lanes(g), cam, vl, gg, known_visible);
+  for (int i = 0; i < 3; ++i) {
+    grad.mean[i] = gg.mean[i];
+    grad.log_scale[i] = gg.log_scale[i];
   }
-  if (y_clamped) {
-    const double L = std::min(cam.lim_y_pos, std::max(-cam.lim_y_neg, c.tyz));
-    v_t[2] += cam.fy * L * iz2 * vJ12;
-  } else {
-    v_t[1] += -cam.fy * iz2 * vJ12;
-    v_t[2] += 2.0 * cam.fy * c.tcam[1] * iz3 * vJ12;
-  }
-  // Projected mean (unclamped).
-  v_t[0] += cam.fx * iz * v.mean2d[0];
-  v_t[1] += cam.fy * iz * v.mean2d[1];
-  v_t[2] += -cam.fx * c.tcam[0] * iz2 * v.mean2d[0] - cam.fy * c.tcam[1] * iz2 * v.mean2d[1];
-  v_t[2] += v.depth;
-  MSGS_UNROLL
-  for (int i = 0; i < 3; ++i) grad.mean[i] += W[i] * v_t[0] + W[3 + i] * v_t[1] + W[6 + i] * v_t[2];
-
-  // cov_cam = W Sigma W^T; Sigma = M M^T with M = Rq diag(s):
-  // dL/dM = 2 W^T v_cov_cam W M = W^T (v_cc2 WM).
-  double X[9], v_M[9];
-  detail::mul33(v_cc2, c.WM, X);
-  detail::mul33_tn(W, X, v_M);
-  double v_Rq[9];
-  MSGS_UNROLL
-  for (int j = 0; j < 3; ++j) {
-    const double v_s = c.Rq[j] * v_M[j] + c.Rq[3 + j] * v_M[3 + j] + c.Rq[6 + j] * v_M[6 + j];
-    grad.log_scale[j] += v_s * c.scale[j] * c.scale_active[j];
-    MSGS_UNROLL
-    for (int i = 0; i < 3; ++i) v_Rq[3 * i + j] = v_M[3 * i + j] * c.scale[j];
-  }
-  double v_qhat[4];
-  detail::quat_to_rotation_backward(c.qhat, v_Rq, v_qhat);
-  const double qdot = c.qhat[0] * v_qhat[0] + c.qhat[1] * v_qhat[1] + c.qhat[2] * v_qhat[2] + c.qhat[3] * v_qhat[3];
-  const double inv_qnorm = 1.0 / c.qnorm;
-  MSGS_UNROLL
-  for (int i = 0; i < 4; ++i) grad.quat[i] += (v_qhat[i] - c.qhat[i] * qdot) * inv_qnorm;
+  for (int i = 0; i < 4; ++i) grad.quat[i] = gg.quat[i];
+  grad.opacity_logit = gg.opacity_logit;
 }
 
 /// Colour of one Gaussian for channels [first, first + count): SH (degree `deg`) evaluated along

@@ -128,50 +128,67 @@ class Rasterizer {
     // Per-Gaussian reduction in a fixed (tile) order, then projection and colour backward.
     // Gaussians are visited in index order (model, gradients and pair lists are then read and
     // written sequentially); only their intersection records are scattered over the tile lists.
-    const std::int64_t V = std::int64_t(visible_.size());
+    // Gaussians are projected kProjLanes at a time (detail::project_bwd_lanes, the same bits as one
+    // at a time), in fixed batches of consecutive visible ids.
+    using D = detail::ProjVec;
+    constexpr int L = detail::kProjLanes;
+    const std::int64_t V = std::int64_t(visible_.size()), batches = (V + L - 1) / L;
     const std::uint64_t M = bins_.pairs();
     const ProjectCamera& pcam = pcam_;
     const int first = first_, count = count_, deg = sh_degree_;
-#pragma omp parallel for schedule(dynamic, 256)
-    for (std::int64_t v = 0; v < V; ++v) {
-      const std::uint32_t g = visible_[std::size_t(v)];
-      double acc[Rec::size(kBands)] = {};
-      for (std::uint64_t m = bins_.pair_offset[std::size_t(v)]; m < bins_.pair_offset[std::size_t(v) + 1]; ++m) {
-        if (m + kRecordPrefetch < M) {
-          const S* ahead = records_.data() + bins_.pair_slot[m + kRecordPrefetch] * std::uint64_t(R);
-          __builtin_prefetch(ahead);
-          __builtin_prefetch(ahead + R - 1);  // a record may straddle two cache lines
+#pragma omp parallel for schedule(dynamic, 32)
+    for (std::int64_t bi = 0; bi < batches; ++bi) {
+      const std::int64_t v0 = bi * L;
+      const int n = int(std::min<std::int64_t>(L, V - v0));
+      std::uint32_t ids[L];
+      for (int l = 0; l < L; ++l) ids[l] = visible_[std::size_t(v0 + (l < n ? l : 0))];
+      double acc[L][Rec::size(kBands)] = {};  // lanes past n stay zero
+      for (int l = 0; l < n; ++l) {
+        const std::size_t v = std::size_t(v0 + l);
+        for (std::uint64_t m = bins_.pair_offset[v]; m < bins_.pair_offset[v + 1]; ++m) {
+          if (m + kRecordPrefetch < M) {
+            const S* ahead = records_.data() + bins_.pair_slot[m + kRecordPrefetch] * std::uint64_t(R);
+            __builtin_prefetch(ahead);
+            __builtin_prefetch(ahead + R - 1);  // a record may straddle two cache lines
+          }
+          const std::uint64_t slot = bins_.pair_slot[m];
+          const S* rec = records_.data() + slot * std::uint64_t(R);
+          for (int k = 0; k < R; ++k) acc[l][k] += double(rec[k]);
         }
-        const std::uint64_t slot = bins_.pair_slot[m];
-        const S* rec = records_.data() + slot * std::uint64_t(R);
-        for (int l = 0; l < R; ++l) acc[l] += double(rec[l]);
       }
-      ProjectedGrad pg;
-      pg.mean2d[0] = acc[Rec::kMeanX];
-      pg.mean2d[1] = acc[Rec::kMeanY];
-      pg.conic[0] = acc[Rec::kConicA];
-      pg.conic[1] = acc[Rec::kConicB];
-      pg.conic[2] = acc[Rec::kConicC];
-      pg.opacity = acc[Rec::kOpacity];
-      if constexpr (Opt.depth) pg.depth = acc[Rec::depth(count)];
-      grads.mean2d[2 * g] = S(pg.mean2d[0]);
-      grads.mean2d[2 * g + 1] = S(pg.mean2d[1]);
-      if constexpr (Opt.absgrad) {
-        grads.absgrad[2 * g] = S(acc[Rec::abs_x(count)]);
-        grads.absgrad[2 * g + 1] = S(acc[Rec::abs_x(count) + 1]);
+      detail::GeometryLanes<D> geo;
+      gather_geometry(model, ids, geo);
+      detail::ProjectedGradLanes<D> pg{};
+      detail::GeometryGradLanes<D> gg{};
+      for (int l = 0; l < n; ++l) {
+        pg.mean2d[0][l] = acc[l][Rec::kMeanX];
+        pg.mean2d[1][l] = acc[l][Rec::kMeanY];
+        pg.conic[0][l] = acc[l][Rec::kConicA];
+        pg.conic[1][l] = acc[l][Rec::kConicB];
+        pg.conic[2][l] = acc[l][Rec::kConicC];
+        pg.opacity[l] = acc[l][Rec::kOpacity];
+        if constexpr (Opt.depth) pg.depth[l] = acc[l][Rec::depth(count)];
       }
-
-      const GaussianGeometry geo = geometry(model, g);
-      GeometryGrad gg;
-      project_bwd<Opt.antialiased>(geo, pcam, pg, gg, /*known_visible=*/true);
-      colour_bwd(model.sh.data() + std::size_t(g) * G::sh_floats, kBands, first, count, deg, geo.mean - pcam.position,
-                 acc + Rec::kBase, grads.model.sh.data() + std::size_t(g) * G::sh_floats, gg.mean);
-      for (int i = 0; i < 3; ++i) {
-        grads.model.means[3 * g + i] = S(gg.mean[i]);
-        grads.model.log_scales[3 * g + i] = S(gg.log_scale[i]);
+      detail::project_bwd_lanes<Opt.antialiased>(geo, pcam, pg, gg, /*known_visible=*/true);
+      for (int l = 0; l < n; ++l) {
+        const std::uint32_t g = ids[l];
+        grads.mean2d[2 * g] = S(pg.mean2d[0][l]);
+        grads.mean2d[2 * g + 1] = S(pg.mean2d[1][l]);
+        if constexpr (Opt.absgrad) {
+          grads.absgrad[2 * g] = S(acc[l][Rec::abs_x(count)]);
+          grads.absgrad[2 * g + 1] = S(acc[l][Rec::abs_x(count) + 1]);
+        }
+        Eigen::Vector3d v_mean(gg.mean[0][l], gg.mean[1][l], gg.mean[2][l]);
+        const Eigen::Vector3d mean(geo.mean[0][l], geo.mean[1][l], geo.mean[2][l]);
+        colour_bwd(model.sh.data() + std::size_t(g) * G::sh_floats, kBands, first, count, deg, mean - pcam.position,
+                   acc[l] + Rec::kBase, grads.model.sh.data() + std::size_t(g) * G::sh_floats, v_mean);
+        for (int i = 0; i < 3; ++i) {
+          grads.model.means[3 * g + i] = S(v_mean[i]);
+          grads.model.log_scales[3 * g + i] = S(gg.log_scale[i][l]);
+        }
+        for (int i = 0; i < 4; ++i) grads.model.quats[4 * g + i] = S(gg.quat[i][l]);
+        grads.model.opacity_logits[g] = S(gg.opacity_logit[l]);
       }
-      for (int i = 0; i < 4; ++i) grads.model.quats[4 * g + i] = S(gg.quat[i]);
-      grads.model.opacity_logits[g] = S(gg.opacity_logit);
     }
     const auto t2 = clock::now();
     timings_.blend_backward += std::chrono::duration<double>(t1 - t0).count();
@@ -217,13 +234,17 @@ class Rasterizer {
                                   std::to_string(channels) + " channel(s)");
   }
 
-  static GaussianGeometry geometry(const Model& m, std::size_t i) {
-    GaussianGeometry g;
-    g.mean = Eigen::Vector3d(double(m.means[3 * i]), double(m.means[3 * i + 1]), double(m.means[3 * i + 2]));
-    g.log_scale = Eigen::Vector3d(double(m.log_scales[3 * i]), double(m.log_scales[3 * i + 1]), double(m.log_scales[3 * i + 2]));
-    g.quat = Eigen::Vector4d(double(m.quats[4 * i]), double(m.quats[4 * i + 1]), double(m.quats[4 * i + 2]), double(m.quats[4 * i + 3]));
-    g.opacity_logit = double(m.opacity_logits[i]);
-    return g;
+  /// The geometry of Gaussians ids[0 .. kProjLanes) as the lanes of one projection vector.
+  static void gather_geometry(const Model& m, const std::uint32_t* ids, detail::GeometryLanes<detail::ProjVec>& g) {
+    for (int l = 0; l < detail::kProjLanes; ++l) {
+      const std::size_t i = ids[l];
+      for (int k = 0; k < 3; ++k) {
+        g.mean[k][l] = double(m.means[3 * i + std::size_t(k)]);
+        g.log_scale[k][l] = double(m.log_scales[3 * i + std::size_t(k)]);
+      }
+      for (int k = 0; k < 4; ++k) g.quat[k][l] = double(m.quats[4 * i + std::size_t(k)]);
+      g.opacity_logit[l] = double(m.opacity_logits[i]);
+    }
   }
 
   void prepare(const Model& model, const Camera<S>& cam, const RenderSettings<S>& st) {
@@ -259,47 +280,60 @@ class Rasterizer {
   }
 
   void project_all(const Model& model) {
-    const std::int64_t N = std::int64_t(model.size());
+    // kProjLanes Gaussians at a time (detail::project_lanes: the same bits as one at a time).
+    using D = detail::ProjVec;
+    constexpr int L = detail::kProjLanes;
+    const std::int64_t N = std::int64_t(model.size()), batches = (N + L - 1) / L;
     const int first = first_, count = count_, deg = sh_degree_;
     const int K = sh_coeffs_for_degree(deg);
-#pragma omp parallel for schedule(dynamic, 1024)
-    for (std::int64_t i = 0; i < N; ++i) {
-      rects_[std::size_t(i)] = PixelRect{};  // culled until shown otherwise
-      radii_[2 * std::size_t(i)] = radii_[2 * std::size_t(i) + 1] = 0;
-      visible_flag_[std::size_t(i)] = 0;
-      const GaussianGeometry geo = geometry(model, std::size_t(i));
-      ProjectedGaussian pg;
-      if (!project_fwd<Opt.antialiased>(geo, pcam_, pg)) continue;
-      const S* sh = model.sh.data() + std::size_t(i) * G::sh_floats;
-      bool finite = true;
-      for (int k = 0; k < K && finite; ++k)
-        for (int ch = 0; ch < count; ++ch) finite = finite && std::isfinite(double(sh[k * kBands + first + ch]));
-      if (!finite) continue;
-      const PixelRect rect = pixel_rect(pg.mean2d[0], pg.mean2d[1], pg.extent[0], pg.extent[1], grid_.width, grid_.height);
-      if (rect.empty()) continue;
-      double dir[3] = {0, 0, 1};
-      if constexpr (G::sh_degree > 0) {
-        if (deg > 0) {
-          const Eigen::Vector3d d = geo.mean - pcam_.position;
-          const double len = d.norm();
-          if (len > 0) { dir[0] = d[0] / len; dir[1] = d[1] / len; dir[2] = d[2] / len; }
+#pragma omp parallel for schedule(dynamic, 128)
+    for (std::int64_t bi = 0; bi < batches; ++bi) {
+      const std::int64_t i0 = bi * L;
+      const int n = int(std::min<std::int64_t>(L, N - i0));
+      std::uint32_t ids[L];
+      for (int l = 0; l < L; ++l) ids[l] = std::uint32_t(i0 + (l < n ? l : 0));  // padding repeats the first
+      detail::GeometryLanes<D> geo;
+      gather_geometry(model, ids, geo);
+      detail::ProjectedLanes<D> pl;
+      const auto visible = detail::project_lanes<Opt.antialiased>(geo, pcam_, pl, nullptr, false);
+      for (int l = 0; l < n; ++l) {
+        const std::size_t i = ids[l];
+        rects_[i] = PixelRect{};  // culled until shown otherwise
+        radii_[2 * i] = radii_[2 * i + 1] = 0;
+        visible_flag_[i] = 0;
+        if (!visible[l]) continue;
+        const S* sh = model.sh.data() + i * G::sh_floats;
+        bool finite = true;
+        for (int k = 0; k < K && finite; ++k)
+          for (int ch = 0; ch < count; ++ch) finite = finite && std::isfinite(double(sh[k * kBands + first + ch]));
+        if (!finite) continue;
+        const double mx = pl.mean2d[0][l], my = pl.mean2d[1][l], ex = pl.extent[0][l], ey = pl.extent[1][l];
+        const PixelRect rect = pixel_rect(mx, my, ex, ey, grid_.width, grid_.height);
+        if (rect.empty()) continue;
+        double dir[3] = {0, 0, 1};
+        if constexpr (G::sh_degree > 0) {
+          if (deg > 0) {
+            const Eigen::Vector3d d = Eigen::Vector3d(geo.mean[0][l], geo.mean[1][l], geo.mean[2][l]) - pcam_.position;
+            const double len = d.norm();
+            if (len > 0) { dir[0] = d[0] / len; dir[1] = d[1] / len; dir[2] = d[2] / len; }
+          }
         }
+        double col[kBands];
+        colour_fwd(sh, kBands, first, count, deg, dir, col);
+        Splat<S>& s = splats_[i];
+        s.mx = S(mx); s.my = S(my);
+        s.a = S(pl.conic[0][l]); s.b = S(pl.conic[1][l]); s.c = S(pl.conic[2][l]);
+        s.o = S(pl.opacity[l]);
+        s.z = S(pl.depth[l]);
+        set_sigma_cut(s, pl.support[l]);
+        s.rect = rect;
+        depth_[i] = S(pl.depth[l]);
+        for (int ch = 0; ch < count; ++ch) colours_[i * std::size_t(count) + std::size_t(ch)] = S(col[ch]);
+        rects_[i] = rect;
+        radii_[2 * i] = std::int32_t(std::min(std::ceil(ex), 1e9));
+        radii_[2 * i + 1] = std::int32_t(std::min(std::ceil(ey), 1e9));
+        visible_flag_[i] = 1;
       }
-      double col[kBands];
-      colour_fwd(sh, kBands, first, count, deg, dir, col);
-      Splat<S>& s = splats_[std::size_t(i)];
-      s.mx = S(pg.mean2d[0]); s.my = S(pg.mean2d[1]);
-      s.a = S(pg.conic[0]); s.b = S(pg.conic[1]); s.c = S(pg.conic[2]);
-      s.o = S(pg.opacity);
-      s.z = S(pg.depth);
-      set_sigma_cut(s, pg.support);
-      s.rect = rect;
-      depth_[std::size_t(i)] = S(pg.depth);
-      for (int ch = 0; ch < count; ++ch) colours_[std::size_t(i) * std::size_t(count) + std::size_t(ch)] = S(col[ch]);
-      rects_[std::size_t(i)] = rect;
-      radii_[2 * std::size_t(i)] = std::int32_t(std::min(std::ceil(pg.extent[0]), 1e9));
-      radii_[2 * std::size_t(i) + 1] = std::int32_t(std::min(std::ceil(pg.extent[1]), 1e9));
-      visible_flag_[std::size_t(i)] = 1;
     }
     visible_.clear();
     for (std::int64_t i = 0; i < N; ++i)
