@@ -113,7 +113,8 @@ inline void radix_sort_by_key(std::vector<std::uint64_t>& keys, std::vector<std:
 #pragma omp parallel for schedule(static)
     for (int k = 0; k < chunks; ++k) {
       std::uint64_t* h = hist.data() + std::size_t(k) * 256;
-      for (std::size_t i = chunk_begin(k); i < chunk_begin(k + 1); ++i) ++h[(keys[i] >> shift) & 0xff];
+      const std::size_t e = chunk_begin(k + 1);  // (hoisted: the stores below could alias it for the compiler)
+      for (std::size_t i = chunk_begin(k); i < e; ++i) ++h[(keys[i] >> shift) & 0xff];
     }
     // Every key shares this byte: the pass would be the identity.
     bool trivial = false;
@@ -134,7 +135,8 @@ inline void radix_sort_by_key(std::vector<std::uint64_t>& keys, std::vector<std:
 #pragma omp parallel for schedule(static)
     for (int k = 0; k < chunks; ++k) {
       std::uint64_t* cursor = hist.data() + std::size_t(k) * 256;
-      for (std::size_t i = chunk_begin(k); i < chunk_begin(k + 1); ++i) {
+      const std::size_t e = chunk_begin(k + 1);
+      for (std::size_t i = chunk_begin(k); i < e; ++i) {
         const std::uint64_t p = cursor[(keys[i] >> shift) & 0xff]++;
         keys2[p] = keys[i];
         ids2[p] = ids[i];
@@ -195,7 +197,8 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
 #pragma omp parallel for schedule(static)
   for (int k = 0; k < chunks; ++k) {
     std::uint64_t* h = sc.hist.data() + std::size_t(k) * std::size_t(tiles);
-    for (std::size_t s = chunk_begin(k); s < chunk_begin(k + 1); ++s) {
+    const std::size_t e = chunk_begin(k + 1);
+    for (std::size_t s = chunk_begin(k); s < e; ++s) {
       const Binning::Scratch::TileRect& r = sc.rects[s];
       for (int ty = r.ty0; ty <= r.ty1; ++ty)
         for (int tx = r.tx0; tx <= r.tx1; ++tx) ++h[std::size_t(ty) * std::size_t(grid.tiles_x) + std::size_t(tx)];
@@ -218,7 +221,8 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
 #pragma omp parallel for schedule(static)
   for (int k = 0; k < chunks; ++k) {
     std::uint64_t* cursor = sc.hist.data() + std::size_t(k) * std::size_t(tiles);
-    for (std::size_t s = chunk_begin(k); s < chunk_begin(k + 1); ++s) {
+    const std::size_t e = chunk_begin(k + 1);
+    for (std::size_t s = chunk_begin(k); s < e; ++s) {
       const std::uint32_t g = out.order[s];
       const Binning::Scratch::TileRect& r = sc.rects[s];
       std::uint64_t m = out.pair_offset[sc.pos[s]];
