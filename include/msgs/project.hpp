@@ -433,6 +433,13 @@ inline typename Lanes<D>::M project_lanes(const GeometryLanes<D>& g, const Proje
   return alive;
 }
 
+// GCC cannot tell that project_lanes fills `out` and `c` whenever a lane survives (the only case in
+// which project_bwd_lanes reads them), and zero-initialising them cost ~6% of the backward's
+// projection. The warning is silenced for this function only.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
 /// project_bwd in lane type D: accumulates into `grad` the gradients of the lanes that project
 /// (the others are left as they are). See project_bwd.
 template <bool Antialiased, class D>
@@ -441,8 +448,8 @@ inline void project_bwd_lanes(const GeometryLanes<D>& g, const ProjectCamera& ca
   using L = Lanes<D>;
   using M = typename L::M;
   const D zero = L::splat(0.0);
-  ProjectedLanes<D> out{};  // (both set whenever a lane projects; initialised for the compiler's sake)
-  ProjectionCacheLanes<D> c{};
+  ProjectedLanes<D> out;
+  ProjectionCacheLanes<D> c;  // both set by project_lanes whenever a lane projects
   const M alive = project_lanes<Antialiased>(g, cam, out, &c, known_visible);
   if (!L::any(alive)) return;
   const double* W = cam.rot;
@@ -542,6 +549,9 @@ inline void project_bwd_lanes(const GeometryLanes<D>& g, const ProjectCamera& ca
   MSGS_UNROLL
   for (int i = 0; i < 4; ++i) add(grad.quat[i], (v_qhat[i] - c.qhat[i] * qdot) * inv_qnorm);
 }
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
 
 /// One Gaussian's geometry as one lane.
 inline GeometryLanes<double> geometry_lanes(const GaussianGeometry& g) {
@@ -648,7 +658,8 @@ inline void colour_fwd(const S* sh, int bands, int first, int count, int deg, co
 template <class S>
 inline void colour_bwd(const S* sh, int bands, int first, int count, int deg, const Eigen::Vector3d& raw_dir,
                        const double* v_colour, S* v_sh, Eigen::Vector3d& v_mean) {
-  const double len = raw_dir.norm();
+  // Degree 0 is constant over directions: no direction (a square root and three divisions) needed.
+  const double len = deg >= 1 ? raw_dir.norm() : 0.0;
   double dir[3] = {0, 0, 1};
   if (len > 0 && std::isfinite(len)) { dir[0] = raw_dir[0] / len; dir[1] = raw_dir[1] / len; dir[2] = raw_dir[2] / len; }
   double Y[sh::kMaxCoeffs];
