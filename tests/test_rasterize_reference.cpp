@@ -9,6 +9,8 @@
 
 #include <cstdio>
 #include <cstring>
+#include <limits>
+#include <random>
 #include <string>
 
 using namespace msgs;
@@ -232,8 +234,9 @@ TEST_CASE("exp_neg_into: within 2 ulp of exp on [0, 87]; negative -> 1, NaN -> e
   detail::exp_neg_into(e, s);
   for (int i = 0; i < L; ++i) {
     CHECK(std::isfinite(e[i]));
-    if (i % 4 == 0) CHECK(e[i] == 1.0f);
-    else CHECK(e[i] == doctest::Approx(std::exp(-87.0)).epsilon(1e-6));
+    const float ei = e[i];  // (a vector element cannot bind to CHECK's reference under Clang)
+    if (i % 4 == 0) CHECK(ei == 1.0f);
+    else CHECK(ei == doctest::Approx(std::exp(-87.0)).epsilon(1e-6));
   }
 }
 
@@ -270,9 +273,50 @@ TEST_CASE("sum_rows, lane_bits, min_into and max_into match their scalar definit
   detail::max_into(hi, a, b);
   std::uint32_t bits_ref = 0;
   for (int i = 0; i < L; ++i) {
-    CHECK(lo[i] == (a[i] < b[i] ? a[i] : b[i]));  // NaN in a -> b
-    CHECK(hi[i] == (a[i] > b[i] ? a[i] : b[i]));
+    const float lo_i = lo[i], hi_i = hi[i];
+    CHECK(lo_i == (a[i] < b[i] ? a[i] : b[i]));  // NaN in a -> b
+    CHECK(hi_i == (a[i] > b[i] ? a[i] : b[i]));
     bits_ref |= std::uint32_t(m[i] != 0) << i;
   }
   CHECK(detail::lane_bits(m) == bits_ref);
+}
+
+TEST_CASE("projection exp and log (lexp, llog): within 1 ulp of libm, the same bits per lane and one at a time") {
+  using D = detail::ProjVec;
+  constexpr int L = detail::kProjLanes;
+  auto ulps = [](double a, double ref) {
+    if (a == ref) return 0.0;
+    return std::abs(a - ref) / (std::nextafter(std::abs(ref), INFINITY) - std::abs(ref));
+  };
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> ue(-745.0, 709.78), ul(-700.0, 700.0), u1(0.5, 300.0);
+  double worst_exp = 0, worst_log = 0;
+  bool same = true;
+  for (int it = 0; it < 50000; ++it) {
+    D x, y;
+    for (int l = 0; l < L; ++l) {
+      x[l] = ue(rng);
+      y[l] = (it & 1) ? std::exp(ul(rng)) : u1(rng);
+    }
+    const D e = detail::lexp(x), g = detail::llog(y);
+    for (int l = 0; l < L; ++l) {
+      const double re = std::exp(x[l]);
+      if (re >= 0x1p-1022) worst_exp = std::max(worst_exp, ulps(e[l], re));  // normal results
+      worst_log = std::max(worst_log, ulps(g[l], std::log(y[l])));
+      same = same && detail::lexp(x[l]) == e[l] && detail::llog(y[l]) == g[l];
+    }
+  }
+  CHECK(worst_exp <= 1.0);
+  CHECK(worst_log <= 1.0);
+  CHECK(same);
+  // Special values: exp over- and underflows like IEEE, NaN stays NaN; log is NaN off its domain.
+  const double inf = std::numeric_limits<double>::infinity(), nan = std::numeric_limits<double>::quiet_NaN();
+  CHECK(detail::lexp(710.0) == inf);
+  CHECK(detail::lexp(inf) == inf);
+  CHECK(detail::lexp(-inf) == 0.0);
+  CHECK(detail::lexp(-744.0) == std::exp(-744.0));  // subnormal
+  CHECK(std::isnan(detail::lexp(nan)));
+  CHECK(detail::lexp(0.0) == 1.0);
+  CHECK(detail::llog(1.0) == 0.0);
+  for (double bad : {0.0, -1.0, 1e-310, inf, -inf, nan}) CHECK(std::isnan(detail::llog(bad)));
 }

@@ -11,6 +11,7 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <type_traits>
 
 #include "camera.hpp"
@@ -97,7 +98,7 @@ namespace detail {
 //
 // Every function below is written once for a lane type D: double (one Gaussian) or ProjVec (a
 // vector of kProjLanes doubles, as many Gaussians at once: 8 with AVX-512, 4 with AVX, 2 with
-// SSE2). Lane by lane both compute the same IEEE operations (exp and log are libm's in both), so
+// SSE2). Lane by lane both compute the same IEEE operations (exp and log included: lexp, llog), so
 // a Gaussian projects to the same bits either way (tested). Culling becomes a lane mask; the
 // scalar form returns as soon as its one lane is culled, the vector form when all are. Culled
 // lanes of a vector compute on (possibly non-finite) garbage that is masked out.
@@ -120,8 +121,6 @@ struct Lanes<double> {
   static bool all(bool m) { return m; }
   static bool not_(bool m) { return !m; }
   static double sqrt(double x) { return std::sqrt(x); }
-  static double exp(double x) { return std::exp(x); }
-  static double log(double x) { return std::log(x); }
 };
 
 template <>
@@ -148,17 +147,6 @@ struct Lanes<ProjVec> {
     for (int i = 0; i < kCount; ++i) r[i] = std::sqrt(x[i]);
     return r;
 #endif
-  }
-  // libm lane by lane: the same correctly rounded-ish values as the scalar form, bit for bit.
-  static ProjVec exp(const ProjVec& x) {
-    ProjVec r = x;
-    for (int i = 0; i < kCount; ++i) r[i] = std::exp(x[i]);
-    return r;
-  }
-  static ProjVec log(const ProjVec& x) {
-    ProjVec r = x;
-    for (int i = 0; i < kCount; ++i) r[i] = std::log(x[i]);
-    return r;
   }
 };
 
@@ -192,12 +180,87 @@ inline D lclamp(const D& v, double lo, double hi) {
 template <class D>
 inline auto lfinite(const D& x) { return (x - x) == Lanes<D>::splat(0.0); }
 
+/// 64-bit integer lanes of D (the bit patterns of its doubles) and conversions to them.
+template <class D>
+struct LaneInts;
+template <>
+struct LaneInts<double> {
+  using I = std::int64_t;
+  static I from_integral(double x) { return I(x); }  // x integral and small
+  static I one_where(bool m) { return m ? 1 : 0; }
+};
+template <>
+struct LaneInts<ProjVec> {
+  using I = Lanes<ProjVec>::M;  // signed 64-bit lanes
+  static I from_integral(const ProjVec& x) { return __builtin_convertvector(x, I); }
+  static I one_where(const I& m) { return -m; }  // true lanes are -1
+};
+
+/// e^x, lane by lane, within 1 ulp or so of the exact value (tested against std::exp): x = n ln 2 + r
+/// with |r| <= ln(2) / 2 (Cody-Waite, ln 2 in two parts), e^r by its Taylor polynomial of degree 13
+/// (truncation below 1e-17), and 2^n applied as two exact powers of two so that results that
+/// overflow, underflow or are subnormal come out as IEEE would round them. NaN gives NaN, +inf
+/// gives inf, -inf gives 0. Written once for both lane types, so the vector and scalar projections
+/// agree bit for bit without calling libm lane by lane.
+template <class D>
+inline D lexp(const D& x_in) {
+  using L = Lanes<D>;
+  using LI = LaneInts<D>;
+  using I = typename LI::I;
+  const D x = lclamp(x_in, -1100.0, 1100.0);           // beyond: 0 or inf anyway; NaN stays NaN
+  const D shift = L::splat(6755399441055744.0);        // 1.5 * 2^52: adding it rounds to an integer
+  D n = (x * 1.4426950408889634 + shift) - shift;      // round(x / ln 2)
+  n = L::sel(n == n, n, L::splat(0.0));                // NaN lanes: any n (r stays NaN)
+  const D r = (x - n * 0x1.62e42fee00000p-1) - n * 0x1.a39ef35793c76p-33;  // n ln2_hi is exact
+  constexpr double c[14] = {1.0 / 6227020800.0, 1.0 / 479001600.0, 1.0 / 39916800.0, 1.0 / 3628800.0,
+                            1.0 / 362880.0,     1.0 / 40320.0,     1.0 / 5040.0,     1.0 / 720.0,
+                            1.0 / 120.0,        1.0 / 24.0,        1.0 / 6.0,        0.5,
+                            1.0,                1.0};
+  D p = L::splat(c[0]);
+  for (int k = 1; k < 14; ++k) p = p * r + c[k];
+  const I k = LI::from_integral(n);
+  const I k1 = k >> 1, k2 = k - k1;  // |k1|, |k2| <= 794: both powers of two are normal doubles
+  const D s1 = std::bit_cast<D>((k1 + 1023) << 52), s2 = std::bit_cast<D>((k2 + 1023) << 52);
+  return (p * s1) * s2;
+}
+
+/// ln x, lane by lane, within about 1 ulp (tested against std::log), for positive normal finite x
+/// (the projection's arguments are in [1, 255]); every other input gives NaN. x = 2^e m with m in
+/// [sqrt(2)/2, sqrt(2)), and ln m = ln(1 + f) from s = f / (2 + f) with fdlibm's minimax polynomial
+/// (the coefficients of its e_log.c) and ln 2 in two parts.
+template <class D>
+inline D llog(const D& x) {
+  using L = Lanes<D>;
+  using LI = LaneInts<D>;
+  using I = typename LI::I;
+  const I bits = std::bit_cast<I>(x);
+  I e = ((bits >> 52) & 0x7ff) - 1023;
+  D m = std::bit_cast<D>((bits & 0x000fffffffffffffLL) | (I{} + (std::int64_t(1023) << 52)));  // [1, 2)
+  const auto big = m > L::splat(1.4142135623730951);
+  m = L::sel(big, m * 0.5, m);
+  e = e + LI::one_where(big);
+  const D f = m - 1.0;  // exact (Sterbenz)
+  const D s = f / (2.0 + f), z = s * s;
+  const D R = z * (6.666666666666735130e-01 +
+                   z * (3.999999999940941908e-01 +
+                        z * (2.857142874366239149e-01 +
+                             z * (2.222219843214978396e-01 +
+                                  z * (1.818357216161805012e-01 + z * (1.531383769920937332e-01 + z * 1.479819860511658591e-01))))));
+  const D hfsq = 0.5 * f * f;
+  D de = L::splat(0.0);
+  if constexpr (std::is_same_v<D, double>) de = double(e);
+  else de = __builtin_convertvector(e, D);
+  const D r = de * 0x1.62e42fee00000p-1 + (f - (hfsq - (s * (hfsq + R) + de * 0x1.a39ef35793c76p-33)));
+  const auto normal = mand(x >= L::splat(0x1p-1022), x <= L::splat(0x1.fffffffffffffp1023));
+  return L::sel(normal, r, L::splat(std::numeric_limits<double>::quiet_NaN()));
+}
+
 /// Numerically stable logistic function: 1 / (1 + e^-x) for x >= 0, e^x / (1 + e^x) below,
 /// with one exponential, e^-|x|, for both.
 template <class D>
 inline D lsigmoid(const D& x) {
   using L = Lanes<D>;
-  const D e = L::exp(L::sel(x < L::splat(0.0), x, -x));
+  const D e = lexp(L::sel(x < L::splat(0.0), x, -x));
   return L::sel(x >= L::splat(0.0), 1.0 / (1.0 + e), e / (1.0 + e));
 }
 
@@ -342,8 +405,8 @@ inline typename Lanes<D>::M project_lanes(const GeometryLanes<D>& g, const Proje
   D kb = L::splat(-1.0), log_sig = zero;
   if (!cache_out) {
     const D ls_max = lmax(g.log_scale[0], lmax(g.log_scale[1], g.log_scale[2]));
-    const D smax = L::exp(lclamp(ls_max, -PC::kLogScaleClamp, PC::kLogScaleClamp));
-    log_sig = L::log(c.sig / PC::kMinAlpha);
+    const D smax = lexp(lclamp(ls_max, -PC::kLogScaleClamp, PC::kLogScaleClamp));
+    log_sig = llog(c.sig / PC::kMinAlpha);
     kb = L::sqrt(lmax(zero, 2.0 * log_sig));
     const D sx = smax * cam.fx * c.inv_tz, sy = smax * cam.fy * c.inv_tz;
     const D bx = kb * L::sqrt(sx * sx * (1.0 + txc * txc) + PC::kDilation) * (1.0 + 1e-6) + 1e-6;
@@ -358,7 +421,7 @@ inline typename Lanes<D>::M project_lanes(const GeometryLanes<D>& g, const Proje
   for (int i = 0; i < 3; ++i) {
     const D cl = lclamp(g.log_scale[i], -PC::kLogScaleClamp, PC::kLogScaleClamp);
     c.scale_active[i] = L::sel(g.log_scale[i] == cl, L::splat(1.0), zero);
-    c.scale[i] = L::exp(cl);
+    c.scale[i] = lexp(cl);
   }
   quat_to_rotation(c.qhat, c.Rq);
   // WM = W Rq diag(scale); cov_cam = W Sigma W^T = WM WM^T.
@@ -418,7 +481,7 @@ inline typename Lanes<D>::M project_lanes(const GeometryLanes<D>& g, const Proje
     // alpha >= 1/255  <=>  sigma <= ln(255 o): the exact support, no 3-sigma cut-off, so the tiled
     // renderer paints exactly what a per-pixel loop over all Gaussians would.
     const bool reuse = !Antialiased && !cache_out;  // opacity == sig: the pre-test's values hold
-    out.support = reuse ? log_sig : L::log(opacity / PC::kMinAlpha);
+    out.support = reuse ? log_sig : llog(opacity / PC::kMinAlpha);
     const D k = reuse ? kb : L::sqrt(lmax(zero, 2.0 * out.support));
     out.extent[0] = k * L::sqrt(c.blur[0]);
     out.extent[1] = k * L::sqrt(c.blur[2]);
