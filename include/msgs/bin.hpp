@@ -161,11 +161,20 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
 
   // 1. Front-to-back order of the visible Gaussians. Sorted are positions v into visible_ids
   //    (increasing ids, so ties stay ordered by id).
+  //    The keys, and the pair count of every Gaussian (its tile-rectangle area, for step 2), are
+  //    filled in one parallel pass.
   sc.keys.resize(V);
   sc.pos.resize(V);
-  for (std::size_t v = 0; v < V; ++v) {
-    sc.keys[v] = detail::depth_key(depth[visible_ids[v]]);
+  out.pair_offset.resize(V + 1);
+  out.pair_offset[0] = 0;
+#pragma omp parallel for schedule(static)
+  for (std::int64_t iv = 0; iv < std::int64_t(V); ++iv) {
+    const std::size_t v = std::size_t(iv);
+    const std::uint32_t g = visible_ids[v];
+    sc.keys[v] = detail::depth_key(depth[g]);
     sc.pos[v] = std::uint32_t(v);
+    const PixelRect& r = rects[g];
+    out.pair_offset[v + 1] = std::uint64_t(r.x1 / TS - r.x0 / TS + 1) * std::uint64_t(r.y1 / TS - r.y0 / TS + 1);
   }
   detail::radix_sort_by_key(sc.keys, sc.pos, int(sizeof(S)), sc.keys2, sc.pos2, sc.hist);
   // The order and the tile rectangles in that order, gathered once so that the two passes below
@@ -180,14 +189,8 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
     sc.rects[std::size_t(i)] = {r.x0 / TS, r.y0 / TS, r.x1 / TS, r.y1 / TS};
   }
 
-  // 2. Pairs per Gaussian (tile-rectangle area), prefix-summed in id order.
-  out.pair_offset.resize(V + 1);
-  out.pair_offset[0] = 0;
-  for (std::size_t v = 0; v < V; ++v) {
-    const PixelRect& r = rects[visible_ids[v]];
-    const std::uint64_t nx = std::uint64_t(r.x1 / TS - r.x0 / TS + 1), ny = std::uint64_t(r.y1 / TS - r.y0 / TS + 1);
-    out.pair_offset[v + 1] = out.pair_offset[v] + nx * ny;
-  }
+  // 2. Pairs per Gaussian (counted in step 1), prefix-summed in id order.
+  for (std::size_t v = 0; v < V; ++v) out.pair_offset[v + 1] += out.pair_offset[v];
   const std::uint64_t M = out.pair_offset[V];
 
   // 3. Stable counting sort by tile over a fixed number of chunks.
