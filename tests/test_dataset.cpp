@@ -339,6 +339,12 @@ TEST_CASE("bad dataset: malformed JSON, bad matrix, missing point cloud") {
   auto root = make_dataset("bad_json");
   write_text(root / "transforms.json", "{\"frames\": [ {\"file_path\": ");
   CHECK(error_of([&] { (void)load_dataset(root); }).find("invalid JSON") != std::string::npos);
+  // A number beyond double's range is out_of_range to the JSON parser, not a parse error (found by
+  // fuzz_dataset): still an IoError naming the file.
+  write_text(root / "transforms.json", "{\"frames\": [], \"fl_x\": 1E1111111111}");
+  const std::string overflow = error_of([&] { (void)load_dataset(root); });
+  CHECK(overflow.find("invalid JSON") != std::string::npos);
+  CHECK(overflow.find("transforms.json") != std::string::npos);
   root = make_dataset("bad_matrix", [](json& tf) { tf["frames"][0]["transform_matrix"][0][0] = 2.0; });
   CHECK(error_of([&] { (void)load_dataset(root); }).find("frames[0].transform_matrix") != std::string::npos);
   root = make_dataset("no_ply");

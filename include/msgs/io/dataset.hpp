@@ -125,7 +125,7 @@ inline nlohmann::json parse_json_file(const std::filesystem::path& p) {
   const std::string text = strip_trailing_commas(read_text(p));
   try {
     return nlohmann::json::parse(text);
-  } catch (const nlohmann::json::parse_error& e) {
+  } catch (const nlohmann::json::exception& e) {  // syntax errors, and numbers out of range (1e999)
     fail(p, cat("invalid JSON: ", e.what()));
   }
 }
