@@ -14,8 +14,10 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -341,11 +343,20 @@ inline Dataset load_dataset(const std::filesystem::path& root, const LoadOptions
   for (std::size_t i = 0; i < ds.frames.size(); ++i) {
     Frame& f = ds.frames[i];
     const Eigen::Matrix4d m = T * c2w_all[i];
+    // Cameras are single precision: a finite double pose can still overflow float (1e55).
+    bool fits = true;  // (a plain loop: Eigen's AVX-512 maxCoeff trips GCC 12's -Wmaybe-uninitialized)
+    for (int k = 0; k < 16; ++k) fits = fits && std::abs(m(k / 4, k % 4)) <= double(std::numeric_limits<float>::max());
+    if (!fits)
+      fail(tf_path, "transform_matrix of " + f.file_path, "entries must fit in single precision (|x| <= 3.4e38)");
     const Camera<float> pose = Camera<float>::from_opengl_c2w(m.cast<float>());
     f.raw_camera.R = pose.R;
     f.raw_camera.t = pose.t;
     f.camera = undistorted_camera(f.raw_camera, f.dist, opt.undistort_zoom);
-    f.camera.validate();
+    try {
+      f.camera.validate();
+    } catch (const std::invalid_argument& e) {  // anything else the checks above did not catch
+      fail(tf_path, "camera of " + f.file_path, e.what());
+    }
   }
 
   // Split: the file when present, else every eval_every-th frame per band.
