@@ -118,7 +118,6 @@ struct Lanes<double> {
   static double splat(double x) { return x; }
   static double sel(bool m, double a, double b) { return m ? a : b; }
   static bool any(bool m) { return m; }
-  static bool all(bool m) { return m; }
   static bool not_(bool m) { return !m; }
   static double sqrt(double x) { return std::sqrt(x); }
 };
@@ -130,7 +129,6 @@ struct Lanes<ProjVec> {
   static ProjVec splat(double x) { return x - ProjVec{}; }
   static ProjVec sel(const M& m, const ProjVec& a, const ProjVec& b) { return m ? a : b; }
   static bool any(const M& m) { return lane_bits(m) != 0; }
-  static bool all(const M& m) { return lane_bits(m) == (1u << kCount) - 1u; }
   static M not_(const M& m) { return ~m; }
   static ProjVec sqrt(const ProjVec& x) {  // (kVectorBytes follows the same macros)
 #if defined(__AVX512F__)
