@@ -131,16 +131,10 @@ void bm_project(benchmark::State& st, int size, int threads, bool scalar) {
     } else {
 #pragma omp parallel for schedule(static) reduction(+ : visible)
       for (std::int64_t b = 0; b < n / L; ++b) {
+        std::uint32_t ids[L];
+        for (int l = 0; l < L; ++l) ids[l] = std::uint32_t(b * L + l);
         detail::GeometryLanes<D> g;
-        for (int l = 0; l < L; ++l) {
-          const std::size_t k = std::size_t(b * L + l);
-          for (int c = 0; c < 3; ++c) {
-            g.mean[c][l] = m.means[3 * k + std::size_t(c)];
-            g.log_scale[c][l] = m.log_scales[3 * k + std::size_t(c)];
-          }
-          for (int c = 0; c < 4; ++c) g.quat[c][l] = m.quats[4 * k + std::size_t(c)];
-          g.opacity_logit[l] = m.opacity_logits[k];
-        }
+        detail::gather_geometry(m, ids, g);
         const auto vis = detail::project_lanes<false>(g, pcam, out_lanes[std::size_t(b)], nullptr, false);
         visible += std::popcount(detail::lane_bits(vis));
       }

@@ -13,6 +13,7 @@
 #include <utility>
 #include <vector>
 
+#include "msgs/detail/math.hpp"
 #include "msgs/gaussian.hpp"
 #include "msgs/schedule.hpp"
 
@@ -642,7 +643,7 @@ class DensityControl {
     std::vector<bool> prune(m, false);
     const double big_limit = cfg_.prune_scale3d * scene_scale_;
     for (std::size_t i = 0; i < m; ++i) {
-      const double o = sigmoid(double(model.opacity_logits[i]));
+      const double o = detail::sigmoid(double(model.opacity_logits[i]));
       bool p = o < cfg_.prune_opacity || !row_finite(model, i);  // a NaN row would never recover
       if (after_reset) {
         p = p || max_scale(model, i) > big_limit;
@@ -705,8 +706,6 @@ class DensityControl {
 
   template <class T>
   static void zero_all(std::vector<T>& v) { std::fill(v.begin(), v.end(), T(0)); }
-
-  static double sigmoid(double x) { return x >= 0 ? 1.0 / (1.0 + std::exp(-x)) : std::exp(x) / (1.0 + std::exp(x)); }
 
   template <class G, class S>
   static double max_scale(const GaussianModel<G, S>& m, std::size_t i) {

@@ -17,7 +17,6 @@
 #include "camera.hpp"
 #include "gaussian.hpp"
 #include "detail/block_simd.hpp"
-#include "detail/math.hpp"
 #include "sh.hpp"
 
 namespace msgs {
@@ -114,7 +113,6 @@ struct Lanes;
 template <>
 struct Lanes<double> {
   using M = bool;
-  static constexpr int kCount = 1;
   static double splat(double x) { return x; }
   static double sel(bool m, double a, double b) { return m ? a : b; }
   static bool any(bool m) { return m; }
@@ -613,6 +611,20 @@ inline void project_bwd_lanes(const GeometryLanes<D>& g, const ProjectCamera& ca
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic pop
 #endif
+
+/// The geometry of the Gaussians ids[0 .. kProjLanes) of `m` as the lanes of one projection vector.
+template <class G, class S>
+inline void gather_geometry(const GaussianModel<G, S>& m, const std::uint32_t* ids, GeometryLanes<ProjVec>& g) {
+  for (int l = 0; l < kProjLanes; ++l) {
+    const std::size_t i = ids[l];
+    for (int k = 0; k < 3; ++k) {
+      g.mean[k][l] = double(m.means[3 * i + std::size_t(k)]);
+      g.log_scale[k][l] = double(m.log_scales[3 * i + std::size_t(k)]);
+    }
+    for (int k = 0; k < 4; ++k) g.quat[k][l] = double(m.quats[4 * i + std::size_t(k)]);
+    g.opacity_logit[l] = double(m.opacity_logits[i]);
+  }
+}
 
 /// One Gaussian's geometry as one lane.
 inline GeometryLanes<double> geometry_lanes(const GaussianGeometry& g) {

@@ -157,7 +157,7 @@ class Rasterizer {
         }
       }
       detail::GeometryLanes<D> geo;
-      gather_geometry(model, ids, geo);
+      detail::gather_geometry(model, ids, geo);
       detail::ProjectedGradLanes<D> pg{};
       detail::GeometryGradLanes<D> gg{};
       for (int l = 0; l < n; ++l) {
@@ -234,19 +234,6 @@ class Rasterizer {
                                   std::to_string(channels) + " channel(s)");
   }
 
-  /// The geometry of Gaussians ids[0 .. kProjLanes) as the lanes of one projection vector.
-  static void gather_geometry(const Model& m, const std::uint32_t* ids, detail::GeometryLanes<detail::ProjVec>& g) {
-    for (int l = 0; l < detail::kProjLanes; ++l) {
-      const std::size_t i = ids[l];
-      for (int k = 0; k < 3; ++k) {
-        g.mean[k][l] = double(m.means[3 * i + std::size_t(k)]);
-        g.log_scale[k][l] = double(m.log_scales[3 * i + std::size_t(k)]);
-      }
-      for (int k = 0; k < 4; ++k) g.quat[k][l] = double(m.quats[4 * i + std::size_t(k)]);
-      g.opacity_logit[l] = double(m.opacity_logits[i]);
-    }
-  }
-
   void prepare(const Model& model, const Camera<S>& cam, const RenderSettings<S>& st) {
     model.check_consistent();
     cam.validate();
@@ -293,7 +280,7 @@ class Rasterizer {
       std::uint32_t ids[L];
       for (int l = 0; l < L; ++l) ids[l] = std::uint32_t(i0 + (l < n ? l : 0));  // padding repeats the first
       detail::GeometryLanes<D> geo;
-      gather_geometry(model, ids, geo);
+      detail::gather_geometry(model, ids, geo);
       detail::ProjectedLanes<D> pl;
       const auto visible = detail::project_lanes<Opt.antialiased>(geo, pcam_, pl, nullptr, false);
       for (int l = 0; l < n; ++l) {

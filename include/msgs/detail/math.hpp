@@ -1,6 +1,6 @@
 // include/msgs/detail/math.hpp
-// Scalar helpers of the projection (a stable sigmoid). The blend stage's vector helpers are in
-// block_simd.hpp.
+// Scalar helpers (a stable sigmoid, for densification's opacity tests). The projection's lane-generic
+// functions are in project.hpp, the blend stage's vector helpers in block_simd.hpp.
 #pragma once
 
 #include <cmath>
