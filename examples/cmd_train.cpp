@@ -23,7 +23,7 @@ namespace {
 constexpr const char* kUsage =
     "usage: msgs train --data DIR --out DIR [--strategy NAME] [--scale F] [--sh-degree D]\n"
     "                  [--bands D,MS_G,...] [--seed S] [--orient none|center] [--resume] [--checkpoint-every N]\n"
-    "                  [--sheets N]\n"
+    "                  [--sheets N] [--adam sparse|dense] [--lr-sh-dc X] [--max-gaussians N]\n"
     "\n"
     "Train Gaussian splats on a multi-spectral dataset (nerfstudio-style layout) with one of the\n"
     "paper's strategies, evaluate every band on the eval split and write to DIR:\n"
@@ -47,6 +47,10 @@ constexpr const char* kUsage =
     "                    gradients first (default 0: no limit)\n"
     "  --lr-sh-dc X      Adam learning rate of the SH DC (base colour) coefficients (default 0.0025,\n"
     "                    the reference's); short schedules may need more: see README\n"
+    "  --adam MODE       dense (default: every Gaussian each step, zero gradient where the view did\n"
+    "                    not see it: torch's Adam, the reference implementation's behaviour) or sparse\n"
+    "                    (gradients, Adam and the scale regulariser only for the Gaussians the view\n"
+    "                    saw; unseen ones and their moments stay: faster, a different optimisation)\n"
     "  --seed S          seed of sampling, backgrounds and initial colours (default 0)\n"
     "  --orient MODE     center (default: mean camera up -> +z, mean camera position -> origin,\n"
     "                    recorded as `transform` in result.json) or none (keep the dataset's coordinates;\n"
@@ -66,7 +70,7 @@ using msgs::cli::split_list;
 int run_train(const std::vector<std::string>& argv) {
   const msgs::cli::Args args(argv,
                              {"data", "out", "strategy", "scale", "sh-degree", "bands", "seed", "checkpoint-every", "orient", "densify",
-                              "sheets", "max-gaussians", "lr-sh-dc"},
+                              "sheets", "max-gaussians", "lr-sh-dc", "adam"},
                              {"help", "no-orient", "quiet", "resume"});
   if (args.flag("help")) { std::fputs(kUsage, stdout); return 0; }
   if (!args.positional().empty()) throw msgs::cli::UsageError("unexpected argument '" + args.positional()[0] + "'");
@@ -82,6 +86,10 @@ int run_train(const std::vector<std::string>& argv) {
   cfg.train.adam.lr_sh_dc = args.number("lr-sh-dc", cfg.train.adam.lr_sh_dc);
   if (!(std::isfinite(cfg.train.adam.lr_sh_dc) && cfg.train.adam.lr_sh_dc > 0))
     throw msgs::cli::UsageError("--lr-sh-dc must be a finite number > 0");
+  const std::string adam_mode = args.get("adam", "dense");
+  if (adam_mode != "sparse" && adam_mode != "dense")
+    throw msgs::cli::UsageError("--adam must be sparse or dense, got '" + adam_mode + "'");
+  cfg.train.sparse = adam_mode == "sparse";
   cfg.init.seed = std::uint32_t(cfg.train.seed);
   cfg.resume = args.flag("resume");
   try {
@@ -129,6 +137,7 @@ int run_train(const std::vector<std::string>& argv) {
   j["sh_degree"] = deg;
   j["seed"] = cfg.train.seed;
   j["lr_sh_dc"] = cfg.train.adam.lr_sh_dc;
+  j["adam"] = adam_mode;
   j["transform"] = std::vector<float>(ds.transform.data(), ds.transform.data() + 16);
   msgs::io::write_text_atomic(out / "result.json", j.dump(2) + "\n");
   const std::string table = msgs::cli::metrics_markdown(res.metrics);

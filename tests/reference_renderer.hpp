@@ -104,6 +104,14 @@ bool reference_all_finite(const S* p, int n) {
   return true;
 }
 
+/// Every SH coefficient of Gaussian i, all bands, finite.
+template <class G, class S>
+bool sh_finite(const GaussianModel<G, S>& model, std::size_t i) {
+  for (int c = 0; c < G::bands; ++c)
+    if (!reference_all_finite(model.sh_row(i, c), G::sh_coeffs)) return false;
+  return true;
+}
+
 /// Project Gaussian i of `model` for `cam` in scalar T, applying the culling rules of §6:
 /// non-finite parameters, quaternion norm ~ 0, z <= near or z > far, opacity < 1/255.
 template <class T, class G, class S>
@@ -116,7 +124,7 @@ ReferenceSplat<T> reference_project(const GaussianModel<G, S>& model, const Came
   const Camera<T> cam = cam_s.template cast<T>();
   if (!reference_all_finite(&model.means[3 * i], 3) || !reference_all_finite(&model.log_scales[3 * i], 3) ||
       !reference_all_finite(&model.quats[4 * i], 4) || !reference_all_finite(&model.opacity_logits[i], 1) ||
-      !reference_all_finite(&model.sh[i * G::sh_floats], G::sh_floats))
+      !sh_finite(model, i))
     return s;
 
   const Vec3 mean(T(model.means[3 * i]), T(model.means[3 * i + 1]), T(model.means[3 * i + 2]));

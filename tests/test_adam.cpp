@@ -2,7 +2,9 @@
 // Checks adam.hpp against hand-computed Adam updates, and that masked groups and SH bands stay untouched.
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <cstdint>
 #include <random>
 #include <vector>
@@ -94,7 +96,7 @@ TEST_CASE("three full steps match textbook Adam with per-group learning rates (d
   for (std::size_t i = 0; i < n; ++i)
     for (int k = 0; k < G7::sh_coeffs; ++k)
       for (int c = 0; c < 7; ++c) {
-        const std::size_t idx = (i * G7::sh_coeffs + static_cast<std::size_t>(k)) * 7 + static_cast<std::size_t>(c);
+        const std::size_t idx = static_cast<std::size_t>(&p.sh_at(i, k, c) - p.sh.data());
         const double lr = k == 0 ? 2.5e-3 : 1.25e-4;
         CHECK(moved(&ModelD::sh, idx) == expect(&ModelD::sh, idx, {lr, lr, lr}));
       }
@@ -202,4 +204,60 @@ TEST_CASE("size mismatches and bad SH ranges throw") {
   CHECK_THROWS_AS(adam.step(p, g3, msgs::AdamMask::band(5, 3)), std::invalid_argument);
   CHECK_THROWS_AS(adam.step(p, g3, msgs::AdamMask::band(-1, 1)), std::invalid_argument);
   CHECK(adam.iteration == 0);  // nothing applied on a rejected step
+}
+
+TEST_CASE("sparse Adam: listed rows update as dense Adam does, other rows and their moments stay, their gradients are never read") {
+  const std::size_t n = 11;
+  Model p(n), g(n);
+  fill_random(p, 21, -1.0f, 1.0f);
+  msgs::Adam<G7> dense({}, n);
+  fill_random(g, 22, -1.0f, 1.0f);
+  dense.step(p, g);  // warm moments everywhere
+  msgs::Adam<G7> sparse = dense;
+  Model ps = p;
+  fill_random(g, 23, -1.0f, 1.0f);
+  const std::vector<std::uint32_t> rows = {0, 3, 4, 10};
+  auto listed = [&](std::size_t i) { return std::find(rows.begin(), rows.end(), i) != rows.end(); };
+  // Poison the gradient rows a sparse step must not read.
+  Model gs = g;
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  for (std::size_t i = 0; i < n; ++i) {
+    if (listed(i)) continue;
+    for (int a = 0; a < 3; ++a) gs.means[3 * i + std::size_t(a)] = gs.log_scales[3 * i + std::size_t(a)] = nan;
+    for (int a = 0; a < 4; ++a) gs.quats[4 * i + std::size_t(a)] = nan;
+    gs.opacity_logits[i] = nan;
+    for (int c = 0; c < 7; ++c)
+      for (int k = 0; k < G7::sh_coeffs; ++k) gs.sh_at(i, k, c) = nan;
+  }
+  const Model p_before = ps;
+  const msgs::AdamMask mask = msgs::AdamMask::band(2, 3);
+  dense.step(p, g, mask);
+  sparse.step(ps, gs, mask, &rows);
+  CHECK(sparse.steps.means == dense.steps.means);
+  CHECK(sparse.steps.sh == dense.steps.sh);
+  CHECK(sparse.iteration == dense.iteration);
+  auto same_row = [&](const Model& a, const Model& b, std::size_t i) {
+    bool same = a.opacity_logits[i] == b.opacity_logits[i];
+    for (int x = 0; x < 3; ++x) same = same && a.means[3 * i + std::size_t(x)] == b.means[3 * i + std::size_t(x)] &&
+                                       a.log_scales[3 * i + std::size_t(x)] == b.log_scales[3 * i + std::size_t(x)];
+    for (int x = 0; x < 4; ++x) same = same && a.quats[4 * i + std::size_t(x)] == b.quats[4 * i + std::size_t(x)];
+    for (int c = 0; c < 7; ++c)
+      for (int k = 0; k < G7::sh_coeffs; ++k) same = same && a.sh_at(i, k, c) == b.sh_at(i, k, c);
+    return same;
+  };
+  for (std::size_t i = 0; i < n; ++i) {
+    INFO("row ", i);
+    if (listed(i)) {
+      CHECK(same_row(ps, p, i));  // bit for bit the dense update
+      CHECK(same_row(sparse.exp_avg, dense.exp_avg, i));
+      CHECK(same_row(sparse.exp_avg_sq, dense.exp_avg_sq, i));
+    } else {
+      CHECK(same_row(ps, p_before, i));
+      CHECK_FALSE(same_row(p, p_before, i));  // dense Adam moved it on momentum
+    }
+  }
+  // Rows must be ascending and inside the model.
+  const std::vector<std::uint32_t> unsorted = {3, 1}, outside = {2, 11};
+  CHECK_THROWS_AS(sparse.step(ps, g, mask, &unsorted), std::invalid_argument);
+  CHECK_THROWS_AS(sparse.step(ps, g, mask, &outside), std::invalid_argument);
 }

@@ -16,6 +16,8 @@
 #include <filesystem>
 #include <fstream>
 
+#include <omp.h>
+
 namespace fs = std::filesystem;
 using namespace msgs;
 
@@ -27,7 +29,8 @@ fs::path scratch() { return msgs::testing::scratch_dir("checkpoint"); }
 
 const io::Dataset& tiny() { return msgs::testing::tiny_scene("checkpoint", 3); }
 
-Trainer<G> make_trainer(const TrainOptions& opt = {}) {
+Trainer<G> make_trainer(TrainOptions opt = {}, bool sparse = true) {
+  opt.sparse = sparse;
   // Joint-Optimized at a scale where refinement, an opacity reset and SpecDelay all fall inside
   // the first 240 steps (refine every 6, spectral bands from step 120).
   const StrategySpec s = parse_strategy("joint+specdelay+msad", ScheduleScale{0.004});
@@ -57,30 +60,78 @@ void check_same(const TrainState<G>& a, const TrainState<G>& b) {
 
 }  // namespace
 
-TEST_CASE("a resumed run equals the uninterrupted run bit for bit") {
+TEST_CASE("a resumed run equals the uninterrupted run bit for bit, with sparse and with dense Adam") {
   constexpr long long kEnd = 240, kStop = 131;  // the stop falls between refinements
-  Trainer<G> straight = make_trainer();
-  REQUIRE(straight.train(0, kEnd) == kEnd);
-  const TrainState<G> want = straight.state(kEnd);
+  for (const bool sparse : {true, false}) {
+    INFO("sparse ", sparse);
+    Trainer<G> straight = make_trainer({}, sparse);
+    REQUIRE(straight.train(0, kEnd) == kEnd);
+    const TrainState<G> want = straight.state(kEnd);
 
-  // Interrupted run: stopped by the flag (as Ctrl-C does), checkpoint written on the way out.
-  const fs::path ckpt = scratch() / "joint.ckpt";
-  fs::remove(ckpt);
-  std::atomic<bool> stop{false};
-  TrainOptions opt;
-  opt.checkpoint_path = ckpt;
-  opt.stop = &stop;
-  opt.progress_every = 1;
-  opt.on_progress = [&](const TrainProgress& p) { if (p.step >= kStop) stop.store(true); };
-  Trainer<G> first = make_trainer(opt);
-  REQUIRE(first.train(0, kEnd) == kStop);
-  REQUIRE(fs::exists(ckpt));
+    // Interrupted run: stopped by the flag (as Ctrl-C does), checkpoint written on the way out.
+    const fs::path ckpt = scratch() / "joint.ckpt";
+    fs::remove(ckpt);
+    std::atomic<bool> stop{false};
+    TrainOptions opt;
+    opt.checkpoint_path = ckpt;
+    opt.stop = &stop;
+    opt.progress_every = 1;
+    opt.on_progress = [&](const TrainProgress& p) { if (p.step >= kStop) stop.store(true); };
+    Trainer<G> first = make_trainer(opt, sparse);
+    REQUIRE(first.train(0, kEnd) == kStop);
+    REQUIRE(fs::exists(ckpt));
 
-  Trainer<G> second = make_trainer();
-  const long long at = second.restore(load_checkpoint<G>(ckpt));
-  CHECK(at == kStop);
-  REQUIRE(second.train(at, kEnd) == kEnd);
-  check_same(second.state(kEnd), want);
+    Trainer<G> second = make_trainer({}, sparse);
+    const long long at = second.restore(load_checkpoint<G>(ckpt));
+    CHECK(at == kStop);
+    REQUIRE(second.train(at, kEnd) == kEnd);
+    check_same(second.state(kEnd), want);
+  }
+}
+
+TEST_CASE("training is bit-identical for 1 and 2 threads, sparse and dense; the two modes differ") {
+  const int saved = omp_get_max_threads();
+  std::vector<TrainState<G>> ends;
+  for (const bool sparse : {true, false}) {
+    INFO("sparse ", sparse);
+    omp_set_num_threads(1);
+    Trainer<G> one = make_trainer({}, sparse);
+    one.train(0, 150);
+    omp_set_num_threads(2);
+    Trainer<G> two = make_trainer({}, sparse);
+    two.train(0, 150);
+    check_same(one.state(150), two.state(150));
+    ends.push_back(two.state(150));
+  }
+  omp_set_num_threads(saved);
+  CHECK_FALSE(same_bits(ends[0].model.means, ends[1].model.means));
+}
+
+TEST_CASE("a version-1 checkpoint (SH interleaved [N, K, Bands]) still loads, transposed into band planes") {
+  Trainer<G> t = make_trainer();
+  t.train(0, 20);
+  const TrainState<G> st = t.state(20);
+  const fs::path p = scratch() / "v2.ckpt";
+  save_checkpoint(p, st);
+  // Rewrite it as version 1: magic '1' and the three SH arrays interleaved.
+  auto bytes = io::read_bytes(p);
+  bytes[7] = '1';
+  const std::size_t n = st.model.size(), F = std::size_t(G::sh_floats);
+  std::size_t at = 32;  // magic, bands, degree, step, count
+  for (const GaussianModel<G, float>* m : {&st.model, &st.exp_avg, &st.exp_avg_sq}) {
+    at += (8 + 3 * n * 4) * 2 + (8 + 4 * n * 4) + (8 + n * 4) + 8;  // means, log_scales, quats, opacities, sh count
+    for (std::size_t i = 0; i < n; ++i)
+      for (int k = 0; k < G::sh_coeffs; ++k)
+        for (int c = 0; c < G::bands; ++c) {
+          const float v = m->sh_at(i, k, c);
+          std::memcpy(bytes.data() + at + ((i * G::sh_coeffs + std::size_t(k)) * G::bands + std::size_t(c)) * 4, &v, 4);
+        }
+    at += n * F * 4;
+  }
+  const fs::path v1 = scratch() / "v1.ckpt";
+  io::write_bytes_atomic(v1, bytes.data(), bytes.size());
+  check_same(load_checkpoint<G>(v1), st);
+  CHECK(same_bits(load_checkpoint<G>(v1).exp_avg_sq.sh, st.exp_avg_sq.sh));
 }
 
 TEST_CASE("checkpoint files refuse the wrong model type, truncation and trailing bytes") {

@@ -169,3 +169,59 @@ TEST_CASE("a reused Gradients object carries nothing over from the previous back
   CHECK(bitwise_equal(reused.grads.mean2d, fresh.mean2d));
   CHECK(bitwise_equal(reused.grads.absgrad, fresh.absgrad));
 }
+
+TEST_CASE("GradientFill::visible writes the visible rows bit for bit as dense does, and no other row") {
+  const Camera<float>& cam = kSmallCam;
+  const GaussianModel<G, float> m = small_scene(1200, 80);
+  Camera<float> shifted = cam;
+  shifted.cx += 40.0f;  // a third of the scene leaves the view
+  for (int variant = 0; variant < 2; ++variant) {
+    INFO("variant ", variant);
+    RenderSettings<float> rs;
+    if (variant == 1) { rs.band_first = 4; rs.band_count = 1; rs.sh_degree = 1; }
+    R r;
+    r.forward(m, shifted, rs);
+    REQUIRE(r.visible_count() < m.size());
+    REQUIRE(r.visible_count() > 100);
+    const int c = r.image().channels;
+    const Image<float> wi = weights(cam.width, cam.height, c, 1), wa = weights(cam.width, cam.height, 1, 2),
+                       wd = weights(cam.width, cam.height, 1, 3);
+    Gradients<G, float> dense;
+    r.backward(wi, &wa, &wd, dense);
+    constexpr float kSentinel = 12345.0f;
+    Gradients<G, float> sparse;
+    sparse.model.resize(m.size());
+    for (auto* v : {&sparse.model.means, &sparse.model.log_scales, &sparse.model.quats, &sparse.model.opacity_logits,
+                    &sparse.model.sh})
+      v->assign(v->size(), kSentinel);
+    sparse.mean2d.assign(2 * m.size(), kSentinel);
+    sparse.absgrad.assign(2 * m.size(), kSentinel);
+    r.backward(wi, &wa, &wd, sparse, GradientFill::visible);
+    std::vector<bool> seen(m.size(), false);
+    for (std::uint32_t i : r.visible()) seen[i] = true;
+    std::size_t wrong = 0;
+    auto expect_row = [&](const std::vector<float>& got, const std::vector<float>& want, std::size_t i, std::size_t w) {
+      for (std::size_t a = 0; a < w; ++a) {
+        const float g = got[i * w + a];
+        if (seen[i] ? std::memcmp(&g, &want[i * w + a], sizeof g) != 0 : g != kSentinel) ++wrong;
+      }
+    };
+    for (std::size_t i = 0; i < m.size(); ++i) {
+      expect_row(sparse.model.means, dense.model.means, i, 3);
+      expect_row(sparse.model.log_scales, dense.model.log_scales, i, 3);
+      expect_row(sparse.model.quats, dense.model.quats, i, 4);
+      expect_row(sparse.model.opacity_logits, dense.model.opacity_logits, i, 1);
+      expect_row(sparse.mean2d, dense.mean2d, i, 2);
+      expect_row(sparse.absgrad, dense.absgrad, i, 2);
+      for (int ch = 0; ch < G::bands; ++ch) {
+        const bool rendered = ch >= r.band_first() && ch < r.band_first() + r.band_count();
+        for (int k = 0; k < G::sh_coeffs; ++k) {
+          const float g = sparse.model.sh_at(i, k, ch), want = dense.model.sh_at(i, k, ch);
+          if (seen[i] && rendered ? std::memcmp(&g, &want, sizeof g) != 0 : g != kSentinel) ++wrong;
+        }
+      }
+    }
+    CHECK(wrong == 0);
+    CHECK(bitwise_equal(sparse.background, dense.background));
+  }
+}

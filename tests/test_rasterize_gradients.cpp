@@ -131,11 +131,13 @@ void check_all_gradients(LinearLoss<G, Opt>& L, GaussianModel<G, double> model, 
   fd_compare("quats", model.quats, g.model.quats, loss, h, rtol, atol, rep, 4);
   fd_compare("opacity_logits", model.opacity_logits, g.model.opacity_logits, loss, h, rtol, atol, rep, 1);
 
-  // SH: rendered channels of active coefficients against FD.
-  auto channel = [&](std::size_t k) { return static_cast<int>(k % G::bands); };
-  auto coeff = [&](std::size_t k) { return static_cast<int>((k / G::bands) % G::sh_coeffs); };
+  // SH: rendered channels of active coefficients against FD. Band planes [Bands, N, K]: the
+  // reported "gaussian" of an SH entry is its row over all planes, channel x N + Gaussian.
+  const std::size_t plane = model.sh_plane_stride();
+  auto channel = [&](std::size_t k) { return static_cast<int>(k / plane); };
+  auto coeff = [&](std::size_t k) { return static_cast<int>(k % G::sh_coeffs); };
   auto rendered = [&](std::size_t k) { return channel(k) >= first && channel(k) < first + count; };
-  fd_compare("sh", model.sh, g.model.sh, loss, h, rtol, atol, rep, G::sh_floats,
+  fd_compare("sh", model.sh, g.model.sh, loss, h, rtol, atol, rep, G::sh_coeffs,
              [&](std::size_t k) { return rendered(k) && coeff(k) < active_k; });
   std::size_t touched_outside = 0, nonzero_inactive = 0;
   for (std::size_t k = 0; k < model.sh.size(); ++k) {

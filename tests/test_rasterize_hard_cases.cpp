@@ -69,9 +69,14 @@ GaussianModel<G, S> without(const GaussianModel<G, S>& m, const std::vector<std:
     r.log_scales.insert(r.log_scales.end(), m.log_scales.begin() + 3 * i, m.log_scales.begin() + 3 * i + 3);
     r.quats.insert(r.quats.end(), m.quats.begin() + 4 * i, m.quats.begin() + 4 * i + 4);
     r.opacity_logits.push_back(m.opacity_logits[i]);
-    const std::size_t f = static_cast<std::size_t>(G::sh_floats);
-    r.sh.insert(r.sh.end(), m.sh.begin() + f * i, m.sh.begin() + f * (i + 1));
   }
+  // SH band planes: each plane keeps the same rows.
+  r.sh.assign(r.size() * static_cast<std::size_t>(G::sh_floats), S(0));
+  for (int c = 0; c < G::bands; ++c)
+    for (std::size_t i = 0, j = 0; i < m.size(); ++i) {
+      if (std::find(drop.begin(), drop.end(), i) != drop.end()) continue;
+      std::copy_n(m.sh_row(i, c), G::sh_coeffs, r.sh_row(j++, c));
+    }
   return r;
 }
 
@@ -161,8 +166,8 @@ void fd_check_gaussian(GaussianModel<G, double> m, const Camera<double>& cam, st
   for (int k = 0; k < 3; ++k) entries.emplace_back(&m.log_scales[3 * i + k], g.model.log_scales[3 * i + k]);
   for (int k = 0; k < 4; ++k) entries.emplace_back(&m.quats[4 * i + k], g.model.quats[4 * i + k]);
   entries.emplace_back(&m.opacity_logits[i], g.model.opacity_logits[i]);
-  const std::size_t f = static_cast<std::size_t>(G::sh_floats);
-  for (std::size_t k = 0; k < f; ++k) entries.emplace_back(&m.sh[f * i + k], g.model.sh[f * i + k]);
+  for (int c = 0; c < G::bands; ++c)
+    for (int k = 0; k < G::sh_coeffs; ++k) entries.emplace_back(&m.sh_at(i, k, c), g.model.sh_at(i, k, c));
   double scale = 1e-12;
   for (auto& e : entries) scale = std::max(scale, std::abs(e.second));
   std::string msg;
@@ -346,7 +351,7 @@ TEST_CASE("NaN and Inf in each parameter are culled, never painted") {
       else if (p < 6) m.log_scales[3 * i + static_cast<std::size_t>(p - 3)] = bad;
       else if (p < 10) m.quats[4 * i + static_cast<std::size_t>(p - 6)] = bad;
       else if (p == 10) m.opacity_logits[i] = bad;
-      else m.sh[i * static_cast<std::size_t>(G31::sh_floats) + static_cast<std::size_t>(p - 11)] = bad;
+      else m.sh_at(i, (p - 11) / G31::bands, (p - 11) % G31::bands) = bad;
       INFO("parameter ", p, " = ", bad);
       check_culled(m, cam, {i});
     }

@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "msgs/gaussian.hpp"
 
@@ -112,25 +113,37 @@ class Adam {
 
   /// One Adam step: `params -= lr * m_hat / (sqrt(v_hat) + eps)` for the groups and SH channels in
   /// `mask`, using `grad` (same layout). Advances `iteration` by one.
-  void step(GaussianModel<G, S>& params, const GaussianModel<G, S>& grad, const AdamMask& mask = {}) {
+  ///
+  /// `rows`: nullptr updates every Gaussian (dense Adam, torch's behaviour: a Gaussian the view did
+  /// not see has a zero gradient and still moves on its momentum). A list of ascending Gaussian
+  /// indices updates those rows only and reads `grad` only there (sparse or "selective" Adam, as
+  /// Taming 3DGS and gsplat's sparse gradients: unseen Gaussians and their moments stay exactly as
+  /// they are); the trainer passes the Gaussians the view saw, so the step costs what they cost.
+  /// The step counters advance per group either way.
+  void step(GaussianModel<G, S>& params, const GaussianModel<G, S>& grad, const AdamMask& mask = {},
+            const std::vector<std::uint32_t>* rows = nullptr) {
     check_sizes(params, grad);
     int first = mask.sh_first, count = mask.sh_count < 0 ? G::bands - mask.sh_first : mask.sh_count;
     if (mask.sh && (first < 0 || count < 0 || first + count > G::bands))
       throw std::invalid_argument("Adam::step: mask SH channel range [" + std::to_string(first) + ", " +
                                   std::to_string(first + count) + ") is outside [0, " + std::to_string(G::bands) +
                                   ")");
+    if (rows)
+      for (std::size_t j = 0; j < rows->size(); ++j)
+        if ((*rows)[j] >= params.size() || (j > 0 && (*rows)[j] <= (*rows)[j - 1]))
+          throw std::invalid_argument("Adam::step: rows must be ascending indices below " + std::to_string(params.size()));
     const std::int64_t t = iteration++;
     if (mask.means)
-      update_flat(params.means, grad.means, exp_avg.means, exp_avg_sq.means, lr_means_at(t), ++steps.means);
+      update_group<3>(params.means, grad.means, exp_avg.means, exp_avg_sq.means, lr_means_at(t), ++steps.means, rows);
     if (mask.scales)
-      update_flat(params.log_scales, grad.log_scales, exp_avg.log_scales, exp_avg_sq.log_scales, config.lr_scales,
-                  ++steps.scales);
+      update_group<3>(params.log_scales, grad.log_scales, exp_avg.log_scales, exp_avg_sq.log_scales, config.lr_scales,
+                      ++steps.scales, rows);
     if (mask.quats)
-      update_flat(params.quats, grad.quats, exp_avg.quats, exp_avg_sq.quats, config.lr_quats, ++steps.quats);
+      update_group<4>(params.quats, grad.quats, exp_avg.quats, exp_avg_sq.quats, config.lr_quats, ++steps.quats, rows);
     if (mask.opacities)
-      update_flat(params.opacity_logits, grad.opacity_logits, exp_avg.opacity_logits, exp_avg_sq.opacity_logits,
-                  config.lr_opacities, ++steps.opacities);
-    if (mask.sh && count > 0) update_sh(params, grad, first, count);
+      update_group<1>(params.opacity_logits, grad.opacity_logits, exp_avg.opacity_logits, exp_avg_sq.opacity_logits,
+                      config.lr_opacities, ++steps.opacities, rows);
+    if (mask.sh && count > 0) update_sh(params, grad, first, count, rows);
   }
 
  private:
@@ -139,6 +152,15 @@ class Adam {
     S inv_bc2_sqrt;  // 1 / sqrt(1 - beta2^t)
   };
 
+  /// Hyper-parameters of the element update, in the scalar type.
+  struct Betas {
+    S b1c, b2, b2c, eps;
+  };
+  Betas betas() const {
+    return {static_cast<S>(1.0 - config.beta1), static_cast<S>(config.beta2), static_cast<S>(1.0 - config.beta2),
+            static_cast<S>(config.eps)};
+  }
+
   Coeffs coeffs(double lr, std::int64_t t) const {
     const double bc1 = 1.0 - std::pow(config.beta1, static_cast<double>(t));
     const double bc2 = 1.0 - std::pow(config.beta2, static_cast<double>(t));
@@ -146,48 +168,59 @@ class Adam {
   }
 
   /// The torch.optim.Adam element update (lerp form of the first moment).
-  static void update_one(S& p, S& m, S& v, S g, S b1c, S b2, S b2c, Coeffs k, S eps) {
-    m += b1c * (g - m);
-    v = b2 * v + b2c * g * g;
-    p -= k.step_size * m / (std::sqrt(v) * k.inv_bc2_sqrt + eps);
+  static void update_one(S& p, S& m, S& v, S g, const Betas& b, Coeffs k) {
+    m += b.b1c * (g - m);
+    v = b.b2 * v + b.b2c * g * g;
+    p -= k.step_size * m / (std::sqrt(v) * k.inv_bc2_sqrt + b.eps);
   }
 
-  void update_flat(std::vector<S>& p, const std::vector<S>& g, std::vector<S>& m, std::vector<S>& v, double lr,
-                   std::int64_t t) const {
+  /// Update `W` consecutive values per row: every row, or the listed ones.
+  template <int W>
+  void update_group(std::vector<S>& p, const std::vector<S>& g, std::vector<S>& m, std::vector<S>& v, double lr,
+                    std::int64_t t, const std::vector<std::uint32_t>* rows) const {
     const Coeffs k = coeffs(lr, t);
-    const S b1c = static_cast<S>(1.0 - config.beta1), b2 = static_cast<S>(config.beta2),
-            b2c = static_cast<S>(1.0 - config.beta2), eps = static_cast<S>(config.eps);
-    const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(p.size());
+    const Betas b = betas();
+    if (!rows) {
+      const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(p.size());
 #pragma omp parallel for schedule(static)
-    for (std::ptrdiff_t i = 0; i < n; ++i) {
-      const std::size_t u = static_cast<std::size_t>(i);
-      update_one(p[u], m[u], v[u], g[u], b1c, b2, b2c, k, eps);
+      for (std::ptrdiff_t i = 0; i < n; ++i) {
+        const std::size_t u = static_cast<std::size_t>(i);
+        update_one(p[u], m[u], v[u], g[u], b, k);
+      }
+      return;
+    }
+    const std::uint32_t* r = rows->data();
+    const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(rows->size());
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t j = 0; j < n; ++j) {
+      const std::size_t base = std::size_t(r[j]) * W;
+      for (std::size_t a = 0; a < std::size_t(W); ++a) update_one(p[base + a], m[base + a], v[base + a], g[base + a], b, k);
     }
   }
 
-  void update_sh(GaussianModel<G, S>& params, const GaussianModel<G, S>& grad, int first, int count) {
-    std::array<Coeffs, G::bands> dc{}, rest{};
+  /// SH of channels [first, first + count): one band plane at a time, the DC coefficient with its
+  /// own learning rate.
+  void update_sh(GaussianModel<G, S>& params, const GaussianModel<G, S>& grad, int first, int count,
+                 const std::vector<std::uint32_t>* rows) {
+    constexpr int K = G::sh_coeffs;
+    const Betas b = betas();
+    const std::size_t stride = params.sh_plane_stride();
     for (int c = first; c < first + count; ++c) {
       const std::int64_t t = ++steps.sh[static_cast<std::size_t>(c)];
-      dc[static_cast<std::size_t>(c)] = coeffs(config.lr_sh_dc, t);
-      rest[static_cast<std::size_t>(c)] = coeffs(config.lr_sh_rest, t);
-    }
-    const S b1c = static_cast<S>(1.0 - config.beta1), b2 = static_cast<S>(config.beta2),
-            b2c = static_cast<S>(1.0 - config.beta2), eps = static_cast<S>(config.eps);
-    const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(params.size());
-    S* p = params.sh.data();
-    const S* g = grad.sh.data();
-    S* m = exp_avg.sh.data();
-    S* v = exp_avg_sq.sh.data();
+      const Coeffs dc = coeffs(config.lr_sh_dc, t), rest = coeffs(config.lr_sh_rest, t);
+      const std::size_t off = std::size_t(c) * stride;
+      S* p = params.sh.data() + off;
+      const S* g = grad.sh.data() + off;
+      S* m = exp_avg.sh.data() + off;
+      S* v = exp_avg_sq.sh.data() + off;
+      const std::uint32_t* r = rows ? rows->data() : nullptr;
+      const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(rows ? rows->size() : params.size());
 #pragma omp parallel for schedule(static)
-    for (std::ptrdiff_t i = 0; i < n; ++i) {
-      for (int k = 0; k < G::sh_coeffs; ++k) {
-        const auto& kc = k == 0 ? dc : rest;
-        const std::ptrdiff_t row = (i * G::sh_coeffs + k) * G::bands;  // [N, K, Bands]
-        for (int c = first; c < first + count; ++c) {
-          const std::ptrdiff_t j = row + c;
-          update_one(p[j], m[j], v[j], g[j], b1c, b2, b2c, kc[static_cast<std::size_t>(c)], eps);
-        }
+      for (std::ptrdiff_t j = 0; j < n; ++j) {
+        const std::size_t base = (r ? std::size_t(r[j]) : std::size_t(j)) * K;
+        update_one(p[base], m[base], v[base], g[base], b, dc);
+        for (std::size_t k = 1; k < std::size_t(K); ++k)
+          update_one(p[base + k], m[base + k], v[base + k], g[base + k], b, rest);
       }
     }
   }

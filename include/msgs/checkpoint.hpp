@@ -4,6 +4,7 @@
 // atomically so an interrupted write never replaces a good checkpoint.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
@@ -36,7 +37,10 @@ struct TrainState {
 
 namespace detail {
 
-inline constexpr char kCheckpointMagic[8] = {'M', 'S', 'G', 'S', 'C', 'K', 'P', '1'};
+/// Version 2 stores SH in band planes [Bands, N, K]; version 1 (before 2026-11) stored [N, K, Bands]
+/// and still loads (transposed on reading).
+inline constexpr char kCheckpointMagic[8] = {'M', 'S', 'G', 'S', 'C', 'K', 'P', '2'};
+inline constexpr char kCheckpointMagicV1[8] = {'M', 'S', 'G', 'S', 'C', 'K', 'P', '1'};
 
 class CkptWriter {
  public:
@@ -94,14 +98,22 @@ void write_model(CkptWriter& w, const GaussianModel<G, float>& m) {
   w.vec(m.means); w.vec(m.log_scales); w.vec(m.quats); w.vec(m.opacity_logits); w.vec(m.sh);
 }
 
+/// `sh_interleaved`: a version-1 file, SH [N, K, Bands].
 template <class G>
-GaussianModel<G, float> read_model(CkptReader& r, std::uint64_t n) {
+GaussianModel<G, float> read_model(CkptReader& r, std::uint64_t n, bool sh_interleaved) {
   GaussianModel<G, float> m;
   m.means = r.vec<float>("means", 3 * n);
   m.log_scales = r.vec<float>("log_scales", 3 * n);
   m.quats = r.vec<float>("quats", 4 * n);
   m.opacity_logits = r.vec<float>("opacity_logits", n);
   m.sh = r.vec<float>("sh", n * std::uint64_t(G::sh_floats));
+  if (sh_interleaved && G::bands > 1) {
+    const std::vector<float> old = std::move(m.sh);
+    m.sh.assign(old.size(), 0.0f);
+    for (std::size_t i = 0; i < n; ++i)
+      for (int k = 0; k < G::sh_coeffs; ++k)
+        for (int c = 0; c < G::bands; ++c) m.sh_at(i, k, c) = old[(i * G::sh_coeffs + std::size_t(k)) * G::bands + std::size_t(c)];
+  }
   return m;
 }
 
@@ -136,8 +148,11 @@ void save_checkpoint(const std::filesystem::path& path, const TrainState<G>& st)
 template <class G>
 TrainState<G> load_checkpoint(const std::filesystem::path& path) {
   detail::CkptReader r(io::read_bytes(path), path);
-  for (char c : detail::kCheckpointMagic)
-    if (r.pod<char>("magic") != c) r.fail("magic", "is not MSGSCKP1 (not an msgs checkpoint)");
+  char magic[8];
+  for (char& c : magic) c = r.pod<char>("magic");
+  const bool v1 = std::equal(magic, magic + 8, detail::kCheckpointMagicV1);
+  if (!v1 && !std::equal(magic, magic + 8, detail::kCheckpointMagic))
+    r.fail("magic", "is not MSGSCKP2 or MSGSCKP1 (not an msgs checkpoint, or one from a newer msgs)");
   const auto bands = r.pod<std::int32_t>("bands");
   const auto deg = r.pod<std::int32_t>("sh_degree");
   if (bands != G::bands || deg != G::sh_degree)
@@ -147,9 +162,9 @@ TrainState<G> load_checkpoint(const std::filesystem::path& path) {
   st.step = r.pod<std::int64_t>("step");
   const auto n = r.pod<std::uint64_t>("gaussians");
   if (n > (std::uint64_t(1) << 34)) r.fail("gaussians", "is implausibly large");
-  st.model = detail::read_model<G>(r, n);
-  st.exp_avg = detail::read_model<G>(r, n);
-  st.exp_avg_sq = detail::read_model<G>(r, n);
+  st.model = detail::read_model<G>(r, n, v1);
+  st.exp_avg = detail::read_model<G>(r, n, v1);
+  st.exp_avg_sq = detail::read_model<G>(r, n, v1);
   st.adam_steps.means = r.pod<std::int64_t>("adam_steps");
   st.adam_steps.scales = r.pod<std::int64_t>("adam_steps");
   st.adam_steps.quats = r.pod<std::int64_t>("adam_steps");

@@ -140,31 +140,40 @@ struct RefinePlan {
 };
 
 namespace detail {
+/// Apply `plan` to `rows`, `planes` consecutive planes of plan.input_size rows of `width` values
+/// each (one plane for most arrays, the band planes for SH), in one pass into a new array.
 template <class T>
 void apply_rows_impl(const RefinePlan& plan, std::vector<T>& rows, std::size_t width, bool zero_fresh,
-                     const char* what) {
+                     const char* what, std::size_t planes = 1) {
   plan.validate();
-  if (rows.size() != plan.input_size * width)
+  if (rows.size() != planes * plan.input_size * width)
     throw std::invalid_argument(std::string(what) + ": array has " + std::to_string(rows.size()) + " values, plan expects " +
-                                std::to_string(plan.input_size) + " rows of " + std::to_string(width));
-  std::vector<T> out(plan.size() * width, T(0));  // fresh rows stay zero
-  for (std::size_t i = 0; i < plan.size(); ++i) {
-    const std::uint32_t s = plan.source[i];
-    if (s == RefinePlan::none || (zero_fresh && plan.fresh[i])) continue;
-    std::copy_n(rows.begin() + static_cast<std::ptrdiff_t>(s * width), width,
-                out.begin() + static_cast<std::ptrdiff_t>(i * width));
+                                std::to_string(planes) + " x " + std::to_string(plan.input_size) + " rows of " +
+                                std::to_string(width));
+  std::vector<T> out(planes * plan.size() * width, T(0));  // fresh rows stay zero
+  const std::ptrdiff_t n_out = static_cast<std::ptrdiff_t>(plan.size());
+  for (std::size_t q = 0; q < planes; ++q) {
+    const T* in = rows.data() + q * plan.input_size * width;
+    T* o = out.data() + q * plan.size() * width;
+#pragma omp parallel for schedule(static, 4096)
+    for (std::ptrdiff_t ii = 0; ii < n_out; ++ii) {
+      const std::size_t i = static_cast<std::size_t>(ii);
+      const std::uint32_t s = plan.source[i];
+      if (s == RefinePlan::none || (zero_fresh && plan.fresh[i])) continue;
+      std::copy_n(in + std::size_t(s) * width, width, o + i * width);
+    }
   }
   rows.swap(out);
 }
 
-/// Calls f(array, row width) for every per-Gaussian array of a model.
+/// Calls f(array, row width, planes) for every per-Gaussian array of a model (SH: one plane per band).
 template <class G, class S, class F>
 void for_each_array(GaussianModel<G, S>& m, F&& f) {
-  f(m.means, std::size_t(3));
-  f(m.log_scales, std::size_t(3));
-  f(m.quats, std::size_t(4));
-  f(m.opacity_logits, std::size_t(1));
-  f(m.sh, static_cast<std::size_t>(G::sh_floats));
+  f(m.means, std::size_t(3), std::size_t(1));
+  f(m.log_scales, std::size_t(3), std::size_t(1));
+  f(m.quats, std::size_t(4), std::size_t(1));
+  f(m.opacity_logits, std::size_t(1), std::size_t(1));
+  f(m.sh, static_cast<std::size_t>(G::sh_coeffs), static_cast<std::size_t>(G::bands));
 }
 }  // namespace detail
 
@@ -186,7 +195,9 @@ void apply_rows_zero_fresh(const RefinePlan& plan, std::vector<T>& rows, std::si
 template <class G, class S>
 void apply(const RefinePlan& plan, GaussianModel<G, S>& model) {
   model.check_consistent();
-  detail::for_each_array(model, [&](auto& v, std::size_t w) { detail::apply_rows_impl(plan, v, w, false, "apply(model)"); });
+  detail::for_each_array(model, [&](auto& v, std::size_t w, std::size_t planes) {
+    detail::apply_rows_impl(plan, v, w, false, "apply(model)", planes);
+  });
 }
 
 /// Apply `plan` to optimiser state stored with the model's layout (Adam's exp_avg, exp_avg_sq):
@@ -194,7 +205,9 @@ void apply(const RefinePlan& plan, GaussianModel<G, S>& model) {
 template <class G, class S>
 void apply_zero_fresh(const RefinePlan& plan, GaussianModel<G, S>& state) {
   state.check_consistent();
-  detail::for_each_array(state, [&](auto& v, std::size_t w) { detail::apply_rows_impl(plan, v, w, true, "apply_zero_fresh(state)"); });
+  detail::for_each_array(state, [&](auto& v, std::size_t w, std::size_t planes) {
+    detail::apply_rows_impl(plan, v, w, true, "apply_zero_fresh(state)", planes);
+  });
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -359,9 +372,13 @@ class DensityStats {
   /// Accumulate one rendered view of `band`. `grad2d` [N, 2] is dL/d(projected mean) in pixels
   /// (or its absgrad variant), `radii` [N, 2] the screen half-extents in pixels ({0, 0} = not
   /// visible). A Gaussian counts as visible when both radii are > 0 (gsplat). Non-finite
-  /// gradients are skipped rather than poisoning the running sum.
+  /// gradients are skipped rather than poisoning the running sum. `rows`: nullptr looks at every
+  /// Gaussian; a list (ascending, e.g. Rasterizer::visible()) looks at those only and reads
+  /// `grad2d` and `radii` only there, which gives the same sums when every Gaussian outside the
+  /// list has zero radii.
   template <class S>
-  void add(int band, const std::vector<S>& grad2d, const std::vector<std::int32_t>& radii, int width, int height) {
+  void add(int band, const std::vector<S>& grad2d, const std::vector<std::int32_t>& radii, int width, int height,
+           const std::vector<std::uint32_t>* rows = nullptr) {
     if (band < 0 || band >= bands_)
       throw std::invalid_argument("DensityStats::add: band " + std::to_string(band) + " outside [0, " +
                                   std::to_string(bands_) + ")");
@@ -369,10 +386,17 @@ class DensityStats {
       throw std::invalid_argument("DensityStats::add: expected grad2d and radii of " + std::to_string(n_) +
                                   " x 2 values, got " + std::to_string(grad2d.size()) + " and " + std::to_string(radii.size()));
     if (width < 1 || height < 1) throw std::invalid_argument("DensityStats::add: image size must be >= 1");
+    if (rows)
+      for (std::uint32_t i : *rows)
+        if (i >= n_) throw std::invalid_argument("DensityStats::add: row " + std::to_string(i) + " outside " + std::to_string(n_));
     const double sx = 0.5 * width, sy = 0.5 * height;
     const double inv_size = 1.0 / double(std::max(width, height));
     const auto b = static_cast<std::size_t>(band), nb = static_cast<std::size_t>(bands_);
-    for (std::size_t i = 0; i < n_; ++i) {
+    const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(rows ? rows->size() : n_);
+    // Rows are distinct, so the iterations write disjoint entries: any thread count, same sums.
+#pragma omp parallel for schedule(static, 4096)
+    for (std::ptrdiff_t j = 0; j < n; ++j) {
+      const std::size_t i = rows ? std::size_t((*rows)[std::size_t(j)]) : std::size_t(j);
       const std::int32_t rx = radii[2 * i], ry = radii[2 * i + 1];
       if (rx <= 0 || ry <= 0) continue;
       const double gx = double(grad2d[2 * i]) * sx, gy = double(grad2d[2 * i + 1]) * sy;
@@ -513,9 +537,10 @@ class DensityControl {
   /// Accumulate the screen-space gradients of one rendered view. `grad2d` [N, 2] must be
   /// Gradients::absgrad when config().absgrad, else Gradients::mean2d; `radii` [N, 2] the
   /// rasteriser's radii; `band` the band the view belongs to (ignored without per-band stats).
+  /// `rows`: as DensityStats::add (nullptr: every Gaussian; else the ones the view saw).
   template <class S>
   void observe(long long step, int band, const std::vector<S>& grad2d, const std::vector<std::int32_t>& radii, int width,
-               int height) {
+               int height, const std::vector<std::uint32_t>* rows = nullptr) {
     if (band < 0 || band >= num_bands_)
       throw std::invalid_argument("DensityControl::observe: band " + std::to_string(band) + " outside [0, " +
                                   std::to_string(num_bands_) + ")");
@@ -528,18 +553,18 @@ class DensityControl {
                                     "; call reset_stats(n) after changing the model outside DensityControl");
       stats_.reset(n);  // first view since construction
     }
-    stats_.add(cfg_.per_band ? band : 0, grad2d, radii, width, height);
+    stats_.add(cfg_.per_band ? band : 0, grad2d, radii, width, height, rows);
   }
 
   /// `observe` with the gradient array chosen from a rasteriser Gradients object (anything with
   /// `mean2d` and `absgrad` members) according to config().absgrad.
   template <class Grads>
   void observe_gradients(long long step, int band, const Grads& grads, const std::vector<std::int32_t>& radii, int width,
-                         int height) {
+                         int height, const std::vector<std::uint32_t>* rows = nullptr) {
     if (cfg_.absgrad && grads.absgrad.size() != grads.mean2d.size())
       throw std::invalid_argument("DensityControl::observe_gradients: absgrad densification needs "
                                   "Gradients::absgrad, which is empty; render with RasterOptions{.absgrad = true}");
-    observe(step, band, cfg_.absgrad ? grads.absgrad : grads.mean2d, radii, width, height);
+    observe(step, band, cfg_.absgrad ? grads.absgrad : grads.mean2d, radii, width, height, rows);
   }
 
   /// The hook after each backward (and after `observe`): refines when `refines_at(step)`, then
@@ -607,54 +632,63 @@ class DensityControl {
       counts.split += split[i];
     }
 
+    // The surgery is planned on row indices first and applied to the model once at the end: one
+    // pass over every array instead of one per stage (duplicate, split, prune).
     // ---- duplicate: copies appended; they are not split ----
     const RefinePlan p_dup = RefinePlan::duplicate(dup);
-    apply(p_dup, model);
-    split.resize(model.size(), false);
+    split.resize(p_dup.size(), false);
 
     // ---- split: originals removed, samples appended in blocks ----
     const RefinePlan p_split = RefinePlan::split(split, cfg_.split_samples);
-    std::vector<std::size_t> sel;
+    std::vector<std::size_t> sel;  // rows of the duplicated set; all < n, since copies are not split
     for (std::size_t i = 0; i < split.size(); ++i)
       if (split[i]) sel.push_back(i);
-    // Sample offsets first, from the parents (rows of the duplicated model).
-    std::vector<double> offsets(sel.size() * static_cast<std::size_t>(cfg_.split_samples) * 3);  // [K, sel, 3]
-    for (std::size_t j = 0; j < sel.size(); ++j)
-      for (int k = 0; k < cfg_.split_samples; ++k)
-        sample_offset(model, sel[j], step, k, &offsets[(static_cast<std::size_t>(k) * sel.size() + j) * 3]);
-    apply(p_split, model);
-    const std::size_t rest = model.size() - sel.size() * static_cast<std::size_t>(cfg_.split_samples);
-    const double dlog = std::log(cfg_.split_scale_divisor);
-    for (std::size_t c = 0; c < sel.size() * static_cast<std::size_t>(cfg_.split_samples); ++c) {
-      const std::size_t row = rest + c;
-      for (int a = 0; a < 3; ++a) {
-        auto& m = model.means[row * 3 + std::size_t(a)];
-        m = static_cast<S>(double(m) + offsets[c * 3 + std::size_t(a)]);
-        auto& ls = model.log_scales[row * 3 + std::size_t(a)];
-        ls = static_cast<S>(double(ls) - dlog);
-      }
-    }
+    const std::size_t samples = sel.size() * static_cast<std::size_t>(cfg_.split_samples);
     RefinePlan plan = p_dup.then(p_split);
+    const std::size_t grown = plan.size(), rest = grown - samples;
+    // Sample rows: the parent's mean moved by an offset drawn in its frame, scales divided.
+    std::vector<S> sample_mean(samples * 3), sample_log_scale(samples * 3);
+    const double dlog = std::log(cfg_.split_scale_divisor);
+    for (std::size_t j = 0; j < sel.size(); ++j)
+      for (int k = 0; k < cfg_.split_samples; ++k) {
+        const std::size_t c = static_cast<std::size_t>(k) * sel.size() + j, parent = sel[j];
+        double offset[3];
+        sample_offset(model, parent, step, k, offset);
+        for (std::size_t a = 0; a < 3; ++a) {
+          sample_mean[c * 3 + a] = static_cast<S>(double(model.means[parent * 3 + a]) + offset[a]);
+          sample_log_scale[c * 3 + a] = static_cast<S>(double(model.log_scales[parent * 3 + a]) - dlog);
+        }
+      }
 
     // ---- prune on the grown set ----
     std::vector<float> radius = stats_.max_radii();  // [N] follows the growth: copies inherit
     apply_rows(plan, radius, 1);
-    const std::size_t m = model.size();
-    std::vector<bool> prune(m, false);
+    std::vector<bool> prune(grown, false);
     const double big_limit = cfg_.prune_scale3d * scene_scale_;
-    for (std::size_t i = 0; i < m; ++i) {
-      const double o = detail::sigmoid(double(model.opacity_logits[i]));
-      bool p = o < cfg_.prune_opacity || !row_finite(model, i);  // a NaN row would never recover
+    for (std::size_t r = 0; r < grown; ++r) {
+      const std::size_t src = plan.source[r];
+      const S* ls = r < rest ? &model.log_scales[3 * src] : &sample_log_scale[3 * (r - rest)];
+      const double o = detail::sigmoid(double(model.opacity_logits[src]));
+      bool p = o < cfg_.prune_opacity || !row_finite(model, src) ||  // a NaN row would never recover
+               (r >= rest && !(finite3(&sample_mean[3 * (r - rest)]) && finite3(ls)));
       if (after_reset) {
-        p = p || max_scale(model, i) > big_limit;
-        if (screen) p = p || double(radius[i]) > cfg_.prune_scale2d;
+        p = p || max_scale(ls) > big_limit;
+        if (screen) p = p || double(radius[r]) > cfg_.prune_scale2d;
       }
-      prune[i] = p;
+      prune[r] = p;
       counts.pruned += p;
     }
     const RefinePlan p_prune = RefinePlan::remove(prune);
-    apply(p_prune, model);
     plan = plan.then(p_prune);
+
+    // ---- apply once, then place the split samples' means and scales ----
+    apply(plan, model);
+    for (std::size_t f = 0; f < p_prune.size(); ++f) {
+      const std::size_t r = p_prune.source[f];
+      if (r < rest) continue;
+      std::copy_n(&sample_mean[3 * (r - rest)], 3, &model.means[3 * f]);
+      std::copy_n(&sample_log_scale[3 * (r - rest)], 3, &model.log_scales[3 * f]);
+    }
 
     stats_.reset(model.size());
     return plan;
@@ -707,10 +741,16 @@ class DensityControl {
   template <class T>
   static void zero_all(std::vector<T>& v) { std::fill(v.begin(), v.end(), T(0)); }
 
+  template <class S>
+  static double max_scale(const S* log_scale) {
+    return std::exp(std::max({double(log_scale[0]), double(log_scale[1]), double(log_scale[2])}));
+  }
   template <class G, class S>
-  static double max_scale(const GaussianModel<G, S>& m, std::size_t i) {
-    const double l = std::max({double(m.log_scales[3 * i]), double(m.log_scales[3 * i + 1]), double(m.log_scales[3 * i + 2])});
-    return std::exp(l);
+  static double max_scale(const GaussianModel<G, S>& m, std::size_t i) { return max_scale(&m.log_scales[3 * i]); }
+
+  template <class S>
+  static bool finite3(const S* v) {
+    return std::isfinite(double(v[0])) && std::isfinite(double(v[1])) && std::isfinite(double(v[2]));
   }
 
   template <class G, class S>
@@ -720,9 +760,12 @@ class DensityControl {
         if (!std::isfinite(double(v[k]))) return false;
       return true;
     };
-    const auto nsh = static_cast<std::size_t>(G::sh_floats);
-    return fin(m.means, 3 * i, 3) && fin(m.log_scales, 3 * i, 3) && fin(m.quats, 4 * i, 4) &&
-           fin(m.opacity_logits, i, 1) && fin(m.sh, nsh * i, nsh);
+    if (!(fin(m.means, 3 * i, 3) && fin(m.log_scales, 3 * i, 3) && fin(m.quats, 4 * i, 4) && fin(m.opacity_logits, i, 1)))
+      return false;
+    const auto K = static_cast<std::size_t>(G::sh_coeffs);
+    for (int c = 0; c < G::bands; ++c)
+      if (!fin(m.sh, static_cast<std::size_t>(m.sh_row(i, c) - m.sh.data()), K)) return false;
+    return true;
   }
 
   /// Offset of split sample k of row i: R (s * z) with z ~ N(0, I) in the Gaussian's local frame.

@@ -3,6 +3,7 @@
 // structure-of-arrays model container. Every compile-time size in msgs comes from here.
 #pragma once
 
+#include <algorithm>
 #include <cstddef>
 #include <stdexcept>
 #include <type_traits>
@@ -47,8 +48,10 @@ template <class T> inline constexpr bool is_gaussian_v = is_gaussian<T>::value;
 
 /// N Gaussians of type `G` as structure of arrays, scalar type `S` (float for training, double
 /// for gradient checks). Storage conventions follow 3DGS: log-scales, wxyz quaternions (not
-/// necessarily normalised), opacity logits, SH coefficients laid out [N, K, Bands] so that the
-/// channels of one coefficient are adjacent.
+/// necessarily normalised), opacity logits. SH coefficients are stored in band planes,
+/// [Bands, N, K]: plane c holds the K coefficients of channel c of every Gaussian, contiguous per
+/// Gaussian. A step that renders one band of a Joint model then reads and writes that plane only
+/// (in the model, its gradients and Adam's moments), never the cache lines of the other bands.
 template <class G, class S = float>
 struct GaussianModel {
   static_assert(is_gaussian_v<G>, "GaussianModel<G>: G must be msgs::Gaussian<Bands, SHDeg>");
@@ -61,7 +64,7 @@ struct GaussianModel {
   std::vector<S> log_scales;      ///< [N, 3] log of the standard deviations along the local axes
   std::vector<S> quats;           ///< [N, 4] rotation quaternion w, x, y, z
   std::vector<S> opacity_logits;  ///< [N]    logit of the opacity
-  std::vector<S> sh;              ///< [N, K, Bands] SH coefficients, K = sh_coeffs
+  std::vector<S> sh;              ///< [Bands, N, K] SH coefficients in band planes, K = sh_coeffs
 
   GaussianModel() = default;
   explicit GaussianModel(std::size_t n) { resize(n); }
@@ -70,13 +73,26 @@ struct GaussianModel {
   std::size_t size() const { return opacity_logits.size(); }
   bool empty() const { return opacity_logits.empty(); }
 
-  /// Resize every array to hold `n` Gaussians (new entries are zero).
+  /// Resize every array to hold `n` Gaussians (new entries are zero; each band plane keeps its
+  /// first min(old, n) Gaussians).
   void resize(std::size_t n) {
+    const std::size_t old = size();
     means.resize(n * 3);
     log_scales.resize(n * 3);
     quats.resize(n * 4);
     opacity_logits.resize(n);
-    sh.resize(n * static_cast<std::size_t>(G::sh_floats));
+    constexpr std::size_t K = static_cast<std::size_t>(G::sh_coeffs);
+    if (G::bands == 1 || old == 0 || sh.size() != old * static_cast<std::size_t>(G::sh_floats)) {
+      if (G::bands > 1) sh.assign(n * static_cast<std::size_t>(G::sh_floats), S(0));
+      else sh.resize(n * K);
+      return;
+    }
+    std::vector<S> planes(n * static_cast<std::size_t>(G::sh_floats), S(0));
+    const std::size_t keep = std::min(old, n) * K;
+    for (std::size_t c = 0; c < static_cast<std::size_t>(G::bands); ++c)
+      std::copy_n(sh.begin() + static_cast<std::ptrdiff_t>(c * old * K), keep,
+                  planes.begin() + static_cast<std::ptrdiff_t>(c * n * K));
+    sh.swap(planes);
   }
 
   /// Fill every array with zero (keeps the size); used for gradient buffers.
@@ -84,13 +100,16 @@ struct GaussianModel {
     for (auto* v : {&means, &log_scales, &quats, &opacity_logits, &sh}) v->assign(v->size(), S(0));
   }
 
+  /// Distance between the band planes of `sh`: N x K values.
+  std::size_t sh_plane_stride() const { return size() * static_cast<std::size_t>(G::sh_coeffs); }
+  /// The K coefficients of channel c of Gaussian i (contiguous; channel c + 1 is sh_plane_stride() further).
+  S* sh_row(std::size_t i, int c) { return sh.data() + static_cast<std::size_t>(c) * sh_plane_stride() + i * G::sh_coeffs; }
+  const S* sh_row(std::size_t i, int c) const {
+    return sh.data() + static_cast<std::size_t>(c) * sh_plane_stride() + i * G::sh_coeffs;
+  }
   /// SH coefficient k of channel c of Gaussian i.
-  S& sh_at(std::size_t i, int k, int c) {
-    return sh[(i * G::sh_coeffs + static_cast<std::size_t>(k)) * G::bands + static_cast<std::size_t>(c)];
-  }
-  const S& sh_at(std::size_t i, int k, int c) const {
-    return sh[(i * G::sh_coeffs + static_cast<std::size_t>(k)) * G::bands + static_cast<std::size_t>(c)];
-  }
+  S& sh_at(std::size_t i, int k, int c) { return sh_row(i, c)[k]; }
+  const S& sh_at(std::size_t i, int k, int c) const { return sh_row(i, c)[k]; }
 
   /// Throw std::invalid_argument if the arrays disagree on N (a model assembled by hand).
   void check_consistent() const {

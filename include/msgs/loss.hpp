@@ -9,6 +9,7 @@
 #include <span>
 #include <stdexcept>
 #include <string>
+#include <cstdint>
 #include <vector>
 
 #ifdef _OPENMP
@@ -479,8 +480,11 @@ struct ScaleRegConfig {
 /// `grad_log_scales` is non-empty ([N, 3]) the gradient is ADDED into it. With ratio = exp(l_max - l_min)
 /// the derivative is +weight*ratio/N on the largest log-scale and -weight*ratio/N on the smallest;
 /// ties share it evenly (as torch.amax/amin). Deterministic: fixed blocks, summed in order.
+/// `rows` (ascending Gaussian indices, or nullptr for all): the value and gradient are taken over
+/// those Gaussians only, still normalised by N (a sparse step regularises what its view saw).
 template <class S>
-double scale_reg(std::span<const S> log_scales, std::span<S> grad_log_scales, const ScaleRegConfig& cfg = {}) {
+double scale_reg(std::span<const S> log_scales, std::span<S> grad_log_scales, const ScaleRegConfig& cfg = {},
+                 const std::vector<std::uint32_t>* rows = nullptr) {
   if (log_scales.size() % 3 != 0)
     throw std::invalid_argument("scale_reg: log_scales has " + std::to_string(log_scales.size()) +
                                 " values, expected a multiple of 3 ([N, 3])");
@@ -490,15 +494,21 @@ double scale_reg(std::span<const S> log_scales, std::span<S> grad_log_scales, co
                                 " values, expected " + std::to_string(log_scales.size()) + " ([N, 3])");
   const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(log_scales.size() / 3);
   if (n == 0) return 0.0;
+  if (rows)
+    for (std::uint32_t r : *rows)
+      if (std::ptrdiff_t(r) >= n)
+        throw std::invalid_argument("scale_reg: row " + std::to_string(r) + " outside " + std::to_string(n) + " Gaussians");
+  const std::ptrdiff_t m = rows ? static_cast<std::ptrdiff_t>(rows->size()) : n;
   constexpr std::ptrdiff_t block = 4096;
-  const std::ptrdiff_t nblocks = (n + block - 1) / block;
+  const std::ptrdiff_t nblocks = (m + block - 1) / block;
   std::vector<double> partial(static_cast<std::size_t>(nblocks), 0.0);
   const double gscale = cfg.weight / static_cast<double>(n);
 #pragma omp parallel for schedule(static)
   for (std::ptrdiff_t b = 0; b < nblocks; ++b) {
     double acc = 0;
-    const std::ptrdiff_t end = std::min(n, (b + 1) * block);
-    for (std::ptrdiff_t i = b * block; i < end; ++i) {
+    const std::ptrdiff_t end = std::min(m, (b + 1) * block);
+    for (std::ptrdiff_t j = b * block; j < end; ++j) {
+      const std::ptrdiff_t i = rows ? std::ptrdiff_t((*rows)[std::size_t(j)]) : j;
       const S* l = log_scales.data() + 3 * i;
       const S lmax = std::max({l[0], l[1], l[2]});
       const S lmin = std::min({l[0], l[1], l[2]});

@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <cstddef>
 #include <cstdint>
 #include <limits>
 #include <type_traits>
@@ -711,25 +712,29 @@ inline void project_bwd(const GaussianGeometry& g, const ProjectCamera& cam, con
   grad.opacity_logit = gg.opacity_logit;
 }
 
-/// Colour of one Gaussian for channels [first, first + count): SH (degree `deg`) evaluated along
-/// the unit view direction `dir`, plus 0.5, clamped at 0. `sh` points at the Gaussian's
-/// coefficients laid out [K, bands].
+/// Colour of one Gaussian for `count` channels: SH (degree `deg`) evaluated along the unit view
+/// direction `dir`, plus 0.5, clamped at 0. `sh` points at the first channel's coefficients, K of
+/// them contiguous; the next channel's start `stride` values further (the band planes of
+/// GaussianModel: `model.sh_row(i, first)` and `model.sh_plane_stride()`).
 template <class S>
-inline void colour_fwd(const S* sh, int bands, int first, int count, int deg, const double dir[3], double* out) {
+inline void colour_fwd(const S* sh, std::size_t stride, int count, int deg, const double dir[3], double* out) {
   double Y[sh::kMaxCoeffs];
   sh::basis(deg, dir[0], dir[1], dir[2], Y);
   const int K = sh_coeffs_for_degree(deg);
   for (int ch = 0; ch < count; ++ch) {
+    const S* c = sh + std::size_t(ch) * stride;
     double v = 0.5;
-    for (int k = 0; k < K; ++k) v += double(sh[k * bands + first + ch]) * Y[k];
+    for (int k = 0; k < K; ++k) v += double(c[k]) * Y[k];
     out[ch] = v > 0.0 ? v : 0.0;
   }
 }
 
-/// Backward of colour_fwd: writes dL/dSH for the rendered channels (`v_sh`, same layout as `sh`)
-/// and accumulates dL/d(mean) through the view direction `raw_dir` = mean - camera position.
+/// Backward of colour_fwd: writes dL/dSH of the `count` channels for the active coefficients
+/// (`v_sh`, same layout and stride as `sh`; the coefficients above degree `deg`, up to
+/// `k_total`, get zero) and accumulates dL/d(mean) through the view direction `raw_dir` = mean -
+/// camera position.
 template <class S>
-inline void colour_bwd(const S* sh, int bands, int first, int count, int deg, const Eigen::Vector3d& raw_dir,
+inline void colour_bwd(const S* sh, std::size_t stride, int count, int deg, int k_total, const Eigen::Vector3d& raw_dir,
                        const double* v_colour, S* v_sh, Eigen::Vector3d& v_mean) {
   // Degree 0 is constant over directions: no direction (a square root and three divisions) needed.
   const double len = deg >= 1 ? raw_dir.norm() : 0.0;
@@ -740,13 +745,16 @@ inline void colour_bwd(const S* sh, int bands, int first, int count, int deg, co
   const int K = sh_coeffs_for_degree(deg);
   double dY[sh::kMaxCoeffs] = {};
   for (int ch = 0; ch < count; ++ch) {
+    const S* c = sh + std::size_t(ch) * stride;
+    S* vc = v_sh + std::size_t(ch) * stride;
     double v = 0.5;
-    for (int k = 0; k < K; ++k) v += double(sh[k * bands + first + ch]) * Y[k];
+    for (int k = 0; k < K; ++k) v += double(c[k]) * Y[k];
     const double g = v > 0.0 ? v_colour[ch] : 0.0;
     for (int k = 0; k < K; ++k) {
-      v_sh[k * bands + first + ch] = S(g * Y[k]);
-      dY[k] += g * double(sh[k * bands + first + ch]);
+      vc[k] = S(g * Y[k]);
+      dY[k] += g * double(c[k]);
     }
+    for (int k = K; k < k_total; ++k) vc[k] = S(0);
   }
   if (deg < 1 || !(len > 0) || !std::isfinite(len)) return;
   double gdir[3] = {0, 0, 0};

@@ -4,6 +4,7 @@
 // and band subset; optional features (depth, antialiasing) are compile-time and cost nothing off.
 #pragma once
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -46,6 +47,10 @@ struct RenderSettings {
   std::vector<S> background;  ///< empty = 0, one value = broadcast, or band_count values
 };
 
+/// Which gradient rows Rasterizer::backward writes: `dense`, every row (zero where the view did
+/// not see a Gaussian); `visible`, only the rows of Rasterizer::visible().
+enum class GradientFill { dense, visible };
+
 /// Gradients produced by Rasterizer::backward.
 template <class G, class S>
 struct Gradients {
@@ -87,7 +92,14 @@ class Rasterizer {
 
   /// Backward of the last forward. `d_image` [H, W, band_count]; `d_alpha`, `d_depth` [H, W, 1]
   /// or nullptr. The model passed to forward must still be alive and unchanged.
-  void backward(const Image<S>& d_image, const Image<S>* d_alpha, const Image<S>* d_depth, Gradients<G, S>& grads) {
+  ///
+  /// `fill`: with GradientFill::dense every gradient of a Gaussian the view did not see is zero
+  /// (a pass over the whole model). With GradientFill::visible only the rows of `visible()` are
+  /// written (every geometry value, mean2d, absgrad, and all K coefficients of the rendered
+  /// channels); other rows keep whatever they held: the work is proportional to what the view saw,
+  /// and the caller reads those rows only (sparse Adam, density statistics over `visible()`).
+  void backward(const Image<S>& d_image, const Image<S>* d_alpha, const Image<S>* d_depth, Gradients<G, S>& grads,
+                GradientFill fill = GradientFill::dense) {
     if (!has_forward_) throw std::logic_error("Rasterizer::backward: no forward pass to differentiate");
     check_grad_image(d_image, count_, "d_image");
     if (d_alpha) check_grad_image(*d_alpha, 1, "d_alpha");
@@ -100,7 +112,10 @@ class Rasterizer {
     const Model& model = *model_;
     const std::size_t N = model.size();
     if (grads.model.size() != N) grads.model.resize(N);
-    zero_grads(grads);
+    grads.mean2d.resize(2 * N);
+    if constexpr (Opt.absgrad) grads.absgrad.resize(2 * N);
+    else grads.absgrad.clear();
+    if (fill == GradientFill::dense) zero_unseen(grads);
 
     // Blend backward: one gradient record per intersection, per-tile background partials.
     using Rec = BlendRecord<Opt.depth, Opt.absgrad>;
@@ -180,8 +195,8 @@ class Rasterizer {
         }
         Eigen::Vector3d v_mean(gg.mean[0][l], gg.mean[1][l], gg.mean[2][l]);
         const Eigen::Vector3d mean(geo.mean[0][l], geo.mean[1][l], geo.mean[2][l]);
-        colour_bwd(model.sh.data() + std::size_t(g) * G::sh_floats, kBands, first, count, deg, mean - pcam.position,
-                   acc[l] + Rec::kBase, grads.model.sh.data() + std::size_t(g) * G::sh_floats, v_mean);
+        colour_bwd(model.sh_row(g, first), model.sh_plane_stride(), count, deg, G::sh_coeffs, mean - pcam.position,
+                   acc[l] + Rec::kBase, grads.model.sh_row(g, first), v_mean);
         for (int i = 0; i < 3; ++i) {
           grads.model.means[3 * g + i] = S(v_mean[i]);
           grads.model.log_scales[3 * g + i] = S(gg.log_scale[i][l]);
@@ -214,6 +229,8 @@ class Rasterizer {
   std::uint64_t intersections() const { return bins_.pairs(); }
   /// Number of Gaussians that survived culling in the last forward.
   std::size_t visible_count() const { return visible_.size(); }
+  /// Their indices, ascending: the rows a GradientFill::visible backward writes.
+  const std::vector<std::uint32_t>& visible() const { return visible_; }
   /// The tile lists of the last forward.
   const Binning& binning() const { return bins_; }
   /// Channels rendered by the last forward.
@@ -273,6 +290,7 @@ class Rasterizer {
     const std::int64_t N = std::int64_t(model.size()), batches = (N + L - 1) / L;
     const int first = first_, count = count_, deg = sh_degree_;
     const int K = sh_coeffs_for_degree(deg);
+    const std::size_t stride = model.sh_plane_stride();
 #pragma omp parallel for schedule(dynamic, 128)
     for (std::int64_t bi = 0; bi < batches; ++bi) {
       const std::int64_t i0 = bi * L;
@@ -289,10 +307,10 @@ class Rasterizer {
         radii_[2 * i] = radii_[2 * i + 1] = 0;
         visible_flag_[i] = 0;
         if (!visible[l]) continue;
-        const S* sh = model.sh.data() + i * G::sh_floats;
+        const S* sh = model.sh_row(i, first);
         bool finite = true;
-        for (int k = 0; k < K && finite; ++k)
-          for (int ch = 0; ch < count; ++ch) finite = finite && std::isfinite(double(sh[k * kBands + first + ch]));
+        for (int ch = 0; ch < count; ++ch)
+          for (int k = 0; k < K; ++k) finite = finite && std::isfinite(double(sh[std::size_t(ch) * stride + std::size_t(k)]));
         if (!finite) continue;
         const double mx = pl.mean2d[0][l], my = pl.mean2d[1][l], ex = pl.extent[0][l], ey = pl.extent[1][l];
         const PixelRect rect = pixel_rect(mx, my, ex, ey, grid_.width, grid_.height);
@@ -306,7 +324,7 @@ class Rasterizer {
           }
         }
         double col[kBands];
-        colour_fwd(sh, kBands, first, count, deg, dir, col);
+        colour_fwd(sh, stride, count, deg, dir, col);
         Splat<S>& s = splats_[i];
         s.mx = S(mx); s.my = S(my);
         s.a = S(pl.conic[0][l]); s.b = S(pl.conic[1][l]); s.c = S(pl.conic[2][l]);
@@ -377,29 +395,22 @@ class Rasterizer {
     fragments_ = frags;
   }
 
-  /// Zero what the gradient reduction will not write: every gradient of a culled Gaussian, and
-  /// for visible ones the SH coefficients above the active degree (of the rendered channels).
-  /// In parallel, since it touches every Gaussian.
-  void zero_grads(Gradients<G, S>& grads) const {
+  /// Zero every gradient of a culled Gaussian (the reduction writes the visible rows, all
+  /// coefficients of the rendered channels included). In parallel, since it touches every Gaussian.
+  void zero_unseen(Gradients<G, S>& grads) const {
     const std::int64_t N = std::int64_t(model_->size());
     auto& m = grads.model;
-    grads.mean2d.resize(2 * std::size_t(N));
-    if constexpr (Opt.absgrad) grads.absgrad.resize(2 * std::size_t(N));
-    else grads.absgrad.clear();
-    const int k_active = sh_coeffs_for_degree(sh_degree_), first = first_, last = first_ + count_;
+    const int first = first_, last = first_ + count_;
 #pragma omp parallel for schedule(static, 4096)
     for (std::int64_t ii = 0; ii < N; ++ii) {
       const std::size_t i = std::size_t(ii);
-      const bool culled = !visible_flag_[i];
-      if (culled) {
-        for (int a = 0; a < 3; ++a) m.means[3 * i + std::size_t(a)] = m.log_scales[3 * i + std::size_t(a)] = S(0);
-        for (int a = 0; a < 4; ++a) m.quats[4 * i + std::size_t(a)] = S(0);
-        m.opacity_logits[i] = S(0);
-        grads.mean2d[2 * i] = grads.mean2d[2 * i + 1] = S(0);
-        if constexpr (Opt.absgrad) grads.absgrad[2 * i] = grads.absgrad[2 * i + 1] = S(0);
-      }
-      for (int k = culled ? 0 : k_active; k < G::sh_coeffs; ++k)
-        for (int ch = first; ch < last; ++ch) m.sh_at(i, k, ch) = S(0);
+      if (visible_flag_[i]) continue;
+      for (int a = 0; a < 3; ++a) m.means[3 * i + std::size_t(a)] = m.log_scales[3 * i + std::size_t(a)] = S(0);
+      for (int a = 0; a < 4; ++a) m.quats[4 * i + std::size_t(a)] = S(0);
+      m.opacity_logits[i] = S(0);
+      grads.mean2d[2 * i] = grads.mean2d[2 * i + 1] = S(0);
+      if constexpr (Opt.absgrad) grads.absgrad[2 * i] = grads.absgrad[2 * i + 1] = S(0);
+      for (int ch = first; ch < last; ++ch) std::fill_n(m.sh_row(i, ch), G::sh_coeffs, S(0));
     }
   }
 

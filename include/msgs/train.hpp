@@ -77,6 +77,11 @@ struct TrainOptions {
   std::function<void(const TrainProgress&)> on_progress;
   const std::atomic<bool>* stop = nullptr;  ///< set by a signal handler: stop after the current step
   bool check_finite = false;         ///< verify every parameter is finite after each step (soak runs)
+  /// false (default): dense Adam over every Gaussian, zero gradients for the ones the view did not
+  /// see (torch's Adam, the reference behaviour). true: a sparse step: gradients, Adam and the
+  /// scale regulariser only for the Gaussians the view saw; the others and their Adam moments stay
+  /// as they are. Cheaper per step, but a different optimisation (README: "Sparse Adam").
+  bool sparse = false;
   /// Where train() writes checkpoints (empty: none): every `checkpoint_every` steps, at the end,
   /// and when stopped early, so an interrupted run always leaves a usable checkpoint.
   std::filesystem::path checkpoint_path;
@@ -231,11 +236,13 @@ class Trainer {
       auto t3 = clock::now();
 
       // 4. Backward.
-      raster.backward(d_image, nullptr, nullptr, grads);
-      if (opt_.check_finite) check_finite_gradients(step, grads);
+      const std::vector<std::uint32_t>& seen = raster.visible();
+      const std::vector<std::uint32_t>* rows = opt_.sparse ? &seen : nullptr;
+      raster.backward(d_image, nullptr, nullptr, grads, opt_.sparse ? GradientFill::visible : GradientFill::dense);
+      if (opt_.check_finite) check_finite_gradients(step, grads, rows);
       if (opt_.scale_reg_every > 0 && step % opt_.scale_reg_every == 0)
         scale_reg<float>(std::span<const float>(model_.log_scales), std::span<float>(grads.model.log_scales),
-                         opt_.scale_reg);
+                         opt_.scale_reg, rows);
       auto t4 = clock::now();
       times_.project += raster.timings().project;
       times_.bin += raster.timings().bin;
@@ -250,13 +257,13 @@ class Trainer {
       ctx.spectral = band.spectral;
       ctx.mask = AdamMask::band(band.first_channel, band.channels);
       hooks_.pre_backward(plan_, ctx);
-      adam_.step(model_, grads.model, ctx.mask);
+      adam_.step(model_, grads.model, ctx.mask, rows);
       auto t5 = clock::now();
       times_.adam += seconds(t4, t5);
 
       // 6. Adaptive density control.
       if (ctx.observe_density && density_.accumulates_at(step))
-        density_.observe_gradients(step, bi, grads, raster.radii(), cam.width, cam.height);
+        density_.observe_gradients(step, bi, grads, raster.radii(), cam.width, cam.height, &seen);
       const DensifyReport rep = density_.step_post_backward(step, model_, adam_.exp_avg, adam_.exp_avg_sq);
       if (rep.refined || rep.opacity_reset) last_rep = rep;
       auto t6 = clock::now();
@@ -357,19 +364,28 @@ class Trainer {
     check(model_.sh, "SH coefficient");
   }
 
-  void check_finite_gradients(long long step, const Gradients<G, float>& g) const {
-    auto check = [&](const std::vector<float>& v, const char* name) {
-      for (float x : v)
-        if (!std::isfinite(x))
-          throw std::runtime_error("training produced a non-finite gradient of " + std::string(name) + " at step " +
-                                   std::to_string(step));
+  /// Every gradient the step will read: all rows, or the listed ones (a sparse step).
+  void check_finite_gradients(long long step, const Gradients<G, float>& g, const std::vector<std::uint32_t>* rows) const {
+    const std::size_t n = model_.size();
+    auto check = [&](const std::vector<float>& v, std::size_t planes, const char* name) {
+      const std::size_t w = v.size() / std::max<std::size_t>(n * planes, 1);
+      auto row_ok = [&](std::size_t q, std::size_t i) {
+        for (std::size_t a = 0; a < w; ++a)
+          if (!std::isfinite(v[(q * n + i) * w + a])) return false;
+        return true;
+      };
+      for (std::size_t q = 0; q < planes; ++q)
+        for (std::size_t j = 0, m = rows ? rows->size() : n; j < m; ++j)
+          if (!row_ok(q, rows ? (*rows)[j] : j))
+            throw std::runtime_error("training produced a non-finite gradient of " + std::string(name) + " at step " +
+                                     std::to_string(step));
     };
-    check(g.model.means, "means");
-    check(g.model.log_scales, "log-scales");
-    check(g.model.quats, "quaternions");
-    check(g.model.opacity_logits, "opacity logits");
-    check(g.model.sh, "SH coefficients");
-    check(g.mean2d, "screen-space means");
+    check(g.model.means, 1, "means");
+    check(g.model.log_scales, 1, "log-scales");
+    check(g.model.quats, 1, "quaternions");
+    check(g.model.opacity_logits, 1, "opacity logits");
+    check(g.model.sh, std::size_t(G::bands), "SH coefficients");
+    check(g.mean2d, 1, "screen-space means");
   }
 
   const io::Dataset* ds_;

@@ -525,10 +525,10 @@ GaussianModel<Gaussian<Count, G::sh_degree>, float> slice_channels(const Gaussia
   o.log_scales = m.log_scales;
   o.quats = m.quats;
   o.opacity_logits = m.opacity_logits;
-  o.sh.resize(m.size() * static_cast<std::size_t>(Out::sh_floats));
-  for (std::size_t i = 0; i < m.size(); ++i)
-    for (int k = 0; k < G::sh_coeffs; ++k)
-      for (int c = 0; c < Count; ++c) o.sh_at(i, k, c) = m.sh_at(i, k, First + c);
+  // Band planes: the channels are one contiguous run of planes.
+  const std::size_t stride = m.sh_plane_stride();
+  o.sh.assign(m.sh.begin() + static_cast<std::ptrdiff_t>(First * stride),
+              m.sh.begin() + static_cast<std::ptrdiff_t>((First + Count) * stride));
   return o;
 }
 
