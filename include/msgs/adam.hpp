@@ -167,11 +167,58 @@ class Adam {
     return {static_cast<S>(lr / bc1), static_cast<S>(1.0 / std::sqrt(bc2))};
   }
 
-  /// The torch.optim.Adam element update (lerp form of the first moment).
-  static void update_one(S& p, S& m, S& v, S g, const Betas& b, Coeffs k) {
-    m += b.b1c * (g - m);
-    v = b.b2 * v + b.b2c * g * g;
-    p -= k.step_size * m / (std::sqrt(v) * k.inv_bc2_sqrt + b.eps);
+  /// The torch.optim.Adam element update (lerp form of the first moment) over `n` consecutive
+  /// values. Restrict pointers let the compiler vectorise it (given -fno-math-errno for the square
+  /// root); every value is independent, so vector and scalar code give the same bits.
+  static void update_run(S* __restrict p, S* __restrict m, S* __restrict v, const S* __restrict g, std::size_t n,
+                         const Betas b, const Coeffs k) {
+    for (std::size_t a = 0; a < n; ++a) {
+      const S ma = m[a] + b.b1c * (g[a] - m[a]);
+      const S va = b.b2 * v[a] + b.b2c * g[a] * g[a];
+      m[a] = ma;
+      v[a] = va;
+      p[a] -= k.step_size * ma / (std::sqrt(va) * k.inv_bc2_sqrt + b.eps);
+    }
+  }
+
+  /// The same over `rows` consecutive rows of K values with per-coefficient step sizes (the SH
+  /// DC coefficient has its own learning rate); the fixed inner length vectorises.
+  template <int K>
+  static void update_rows(S* __restrict p, S* __restrict m, S* __restrict v, const S* __restrict g, std::size_t rows,
+                          const Betas b, const S* __restrict step_size, const S* __restrict inv_bc2_sqrt) {
+    for (std::size_t r = 0; r < rows; ++r, p += K, m += K, v += K, g += K)
+      for (int a = 0; a < K; ++a) {
+        const S ma = m[a] + b.b1c * (g[a] - m[a]);
+        const S va = b.b2 * v[a] + b.b2c * g[a] * g[a];
+        m[a] = ma;
+        v[a] = va;
+        p[a] -= step_size[a] * ma / (std::sqrt(va) * inv_bc2_sqrt[a] + b.eps);
+      }
+  }
+
+  /// Call f(first_row, row_count) for runs of consecutive rows: every row [0, n), or the listed
+  /// ones (ascending), in parallel over fixed chunks of the list (consecutive visible Gaussians
+  /// then form long runs, which vectorise like the dense update).
+  template <class F>
+  static void for_each_run(std::size_t n, const std::vector<std::uint32_t>* rows, F&& f) {
+    constexpr std::ptrdiff_t kChunk = 2048;
+    const std::ptrdiff_t total = static_cast<std::ptrdiff_t>(rows ? rows->size() : n);
+    const std::ptrdiff_t chunks = (total + kChunk - 1) / kChunk;
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t c = 0; c < chunks; ++c) {
+      const std::ptrdiff_t j1 = std::min(total, (c + 1) * kChunk);
+      if (!rows) {
+        f(std::size_t(c * kChunk), std::size_t(j1 - c * kChunk));
+        continue;
+      }
+      const std::uint32_t* r = rows->data();
+      for (std::ptrdiff_t j = c * kChunk; j < j1;) {
+        std::ptrdiff_t e = j + 1;
+        while (e < j1 && r[e] == r[e - 1] + 1) ++e;
+        f(std::size_t(r[j]), std::size_t(e - j));
+        j = e;
+      }
+    }
   }
 
   /// Update `W` consecutive values per row: every row, or the listed ones.
@@ -180,22 +227,14 @@ class Adam {
                     std::int64_t t, const std::vector<std::uint32_t>* rows) const {
     const Coeffs k = coeffs(lr, t);
     const Betas b = betas();
-    if (!rows) {
-      const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(p.size());
-#pragma omp parallel for schedule(static)
-      for (std::ptrdiff_t i = 0; i < n; ++i) {
-        const std::size_t u = static_cast<std::size_t>(i);
-        update_one(p[u], m[u], v[u], g[u], b, k);
-      }
-      return;
-    }
-    const std::uint32_t* r = rows->data();
-    const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(rows->size());
-#pragma omp parallel for schedule(static)
-    for (std::ptrdiff_t j = 0; j < n; ++j) {
-      const std::size_t base = std::size_t(r[j]) * W;
-      for (std::size_t a = 0; a < std::size_t(W); ++a) update_one(p[base + a], m[base + a], v[base + a], g[base + a], b, k);
-    }
+    S* pp = p.data();
+    S* mp = m.data();
+    S* vp = v.data();
+    const S* gp = g.data();
+    for_each_run(p.size() / W, rows, [&](std::size_t row, std::size_t count) {
+      const std::size_t o = row * W;
+      update_run(pp + o, mp + o, vp + o, gp + o, count * W, b, k);
+    });
   }
 
   /// SH of channels [first, first + count): one band plane at a time, the DC coefficient with its
@@ -208,20 +247,20 @@ class Adam {
     for (int c = first; c < first + count; ++c) {
       const std::int64_t t = ++steps.sh[static_cast<std::size_t>(c)];
       const Coeffs dc = coeffs(config.lr_sh_dc, t), rest = coeffs(config.lr_sh_rest, t);
+      std::array<S, K> step_size, inv;
+      step_size.fill(rest.step_size);
+      inv.fill(rest.inv_bc2_sqrt);
+      step_size[0] = dc.step_size;
+      inv[0] = dc.inv_bc2_sqrt;
       const std::size_t off = std::size_t(c) * stride;
       S* p = params.sh.data() + off;
       const S* g = grad.sh.data() + off;
       S* m = exp_avg.sh.data() + off;
       S* v = exp_avg_sq.sh.data() + off;
-      const std::uint32_t* r = rows ? rows->data() : nullptr;
-      const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(rows ? rows->size() : params.size());
-#pragma omp parallel for schedule(static)
-      for (std::ptrdiff_t j = 0; j < n; ++j) {
-        const std::size_t base = (r ? std::size_t(r[j]) : std::size_t(j)) * K;
-        update_one(p[base], m[base], v[base], g[base], b, dc);
-        for (std::size_t k = 1; k < std::size_t(K); ++k)
-          update_one(p[base + k], m[base + k], v[base + k], g[base + k], b, rest);
-      }
+      for_each_run(params.size(), rows, [&](std::size_t row, std::size_t n) {
+        const std::size_t o = row * K;
+        update_rows<K>(p + o, m + o, v + o, g + o, n, b, step_size.data(), inv.data());
+      });
     }
   }
 
