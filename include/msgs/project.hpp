@@ -712,56 +712,96 @@ inline void project_bwd(const GaussianGeometry& g, const ProjectCamera& cam, con
   grad.opacity_logit = gg.opacity_logit;
 }
 
-/// Colour of one Gaussian for `count` channels: SH (degree `deg`) evaluated along the unit view
-/// direction `dir`, plus 0.5, clamped at 0. `sh` points at the first channel's coefficients, K of
-/// them contiguous; the next channel's start `stride` values further (the band planes of
-/// GaussianModel: `model.sh_row(i, first)` and `model.sh_plane_stride()`).
-template <class S>
-inline void colour_fwd(const S* sh, std::size_t stride, int count, int deg, const double dir[3], double* out) {
-  double Y[sh::kMaxCoeffs];
-  sh::basis(deg, dir[0], dir[1], dir[2], Y);
+namespace detail {
+
+/// Unit view direction per lane from raw = mean - camera position, and |raw|; (0, 0, 1) where
+/// |raw| is 0 or not finite (the colour then does not depend on the direction's gradient).
+template <class D>
+inline void view_dir(const D raw[3], D dir[3], D& len) {
+  using L = Lanes<D>;
+  len = L::sqrt((raw[0] * raw[0] + raw[1] * raw[1]) + raw[2] * raw[2]);
+  const auto ok = mand(len > L::splat(0.0), lfinite(len));
+  dir[0] = L::sel(ok, raw[0] / len, L::splat(0.0));
+  dir[1] = L::sel(ok, raw[1] / len, L::splat(0.0));
+  dir[2] = L::sel(ok, raw[2] / len, L::splat(1.0));
+}
+
+/// Colour of `count` channels in lane type D: SH of degree `deg` along the unit direction `dir`,
+/// plus 0.5, clamped at 0 (NaN becomes 0). `coef(ch, k)` gives coefficient k of channel ch.
+template <class D, class Coef>
+inline void colour_fwd_lanes(int count, int deg, const D dir[3], Coef&& coef, D* out) {
+  using L = Lanes<D>;
+  D Y[sh::kMaxCoeffs];
+  sh::basis<D>(deg, dir[0], dir[1], dir[2], Y);
   const int K = sh_coeffs_for_degree(deg);
   for (int ch = 0; ch < count; ++ch) {
-    const S* c = sh + std::size_t(ch) * stride;
-    double v = 0.5;
-    for (int k = 0; k < K; ++k) v += double(c[k]) * Y[k];
-    out[ch] = v > 0.0 ? v : 0.0;
+    D v = L::splat(0.5);
+    for (int k = 0; k < K; ++k) v += coef(ch, k) * Y[k];
+    out[ch] = L::sel(v > L::splat(0.0), v, L::splat(0.0));
   }
 }
 
-/// Backward of colour_fwd: writes dL/dSH of the `count` channels for the active coefficients
-/// (`v_sh`, same layout and stride as `sh`; the coefficients above degree `deg`, up to
-/// `k_total`, get zero) and accumulates dL/d(mean) through the view direction `raw_dir` = mean -
-/// camera position.
-template <class S>
-inline void colour_bwd(const S* sh, std::size_t stride, int count, int deg, int k_total, const Eigen::Vector3d& raw_dir,
-                       const double* v_colour, S* v_sh, Eigen::Vector3d& v_mean) {
+/// Backward of colour_fwd_lanes for raw = mean - camera position: `store(ch, k, value)` receives
+/// dL/dSH of the active coefficients of each channel, and dL/d(mean) through the view direction is
+/// added to `v_mean`. `v_colour[ch]` is dL/d(colour).
+template <class D, class Coef, class Store>
+inline void colour_bwd_lanes(int count, int deg, const D raw[3], Coef&& coef, const D* v_colour, Store&& store,
+                             D v_mean[3]) {
+  using L = Lanes<D>;
   // Degree 0 is constant over directions: no direction (a square root and three divisions) needed.
-  const double len = deg >= 1 ? raw_dir.norm() : 0.0;
-  double dir[3] = {0, 0, 1};
-  if (len > 0 && std::isfinite(len)) { dir[0] = raw_dir[0] / len; dir[1] = raw_dir[1] / len; dir[2] = raw_dir[2] / len; }
-  double Y[sh::kMaxCoeffs];
-  sh::basis(deg, dir[0], dir[1], dir[2], Y);
+  D dir[3] = {L::splat(0.0), L::splat(0.0), L::splat(1.0)}, len = L::splat(0.0);
+  if (deg >= 1) view_dir(raw, dir, len);
+  D Y[sh::kMaxCoeffs];
+  sh::basis<D>(deg, dir[0], dir[1], dir[2], Y);
   const int K = sh_coeffs_for_degree(deg);
-  double dY[sh::kMaxCoeffs] = {};
+  D dY[sh::kMaxCoeffs];
+  for (int k = 0; k < K; ++k) dY[k] = L::splat(0.0);
   for (int ch = 0; ch < count; ++ch) {
-    const S* c = sh + std::size_t(ch) * stride;
-    S* vc = v_sh + std::size_t(ch) * stride;
-    double v = 0.5;
-    for (int k = 0; k < K; ++k) v += double(c[k]) * Y[k];
-    const double g = v > 0.0 ? v_colour[ch] : 0.0;
+    D c[sh::kMaxCoeffs];
+    D v = L::splat(0.5);
     for (int k = 0; k < K; ++k) {
-      vc[k] = S(g * Y[k]);
-      dY[k] += g * double(c[k]);
+      c[k] = coef(ch, k);
+      v += c[k] * Y[k];
     }
-    for (int k = K; k < k_total; ++k) vc[k] = S(0);
+    const D g = L::sel(v > L::splat(0.0), v_colour[ch], L::splat(0.0));
+    for (int k = 0; k < K; ++k) {
+      store(ch, k, g * Y[k]);
+      dY[k] += g * c[k];
+    }
   }
-  if (deg < 1 || !(len > 0) || !std::isfinite(len)) return;
-  double gdir[3] = {0, 0, 0};
-  sh::basis_backward(deg, dir[0], dir[1], dir[2], dY, gdir);
-  const Eigen::Vector3d gd(gdir[0], gdir[1], gdir[2]);
-  const Eigen::Vector3d d(dir[0], dir[1], dir[2]);
-  v_mean += (gd - d * d.dot(gd)) / len;
+  if (deg < 1) return;
+  D gdir[3] = {L::splat(0.0), L::splat(0.0), L::splat(0.0)};
+  sh::basis_backward<D>(deg, dir[0], dir[1], dir[2], dY, gdir);
+  const D dot = (dir[0] * gdir[0] + dir[1] * gdir[1]) + dir[2] * gdir[2];
+  const auto ok = mand(len > L::splat(0.0), lfinite(len));
+  for (int i = 0; i < 3; ++i) v_mean[i] += L::sel(ok, (gdir[i] - dir[i] * dot) / len, L::splat(0.0));
+}
+
+}  // namespace detail
+
+/// Colour of one Gaussian for `count` channels: SH (degree `deg`) evaluated along the unit view
+/// direction `dir`, plus 0.5, clamped at 0. `sh` points at the first channel's coefficients, K of
+/// them contiguous; the next channel's start `stride` values further (the band planes of
+/// GaussianModel: `model.sh_row(i, first)` and `model.sh_plane_stride()`). The rasteriser runs the
+/// same operations on a vector register of Gaussians (detail::colour_fwd_lanes).
+template <class S>
+inline void colour_fwd(const S* sh, std::size_t stride, int count, int deg, const double dir[3], double* out) {
+  detail::colour_fwd_lanes<double>(count, deg, dir,
+                                   [&](int ch, int k) { return double(sh[std::size_t(ch) * stride + std::size_t(k)]); }, out);
+}
+
+/// Backward of colour_fwd: writes dL/dSH of the `count` channels for the active coefficients
+/// (`v_sh`, same layout and stride as `sh`; the coefficients above degree `deg`, up to `k_total`,
+/// get zero) and adds dL/d(mean) through the view direction `raw_dir` = mean - camera position
+/// to `v_mean`.
+template <class S>
+inline void colour_bwd(const S* sh, std::size_t stride, int count, int deg, int k_total, const double raw_dir[3],
+                       const double* v_colour, S* v_sh, double v_mean[3]) {
+  detail::colour_bwd_lanes<double>(
+      count, deg, raw_dir, [&](int ch, int k) { return double(sh[std::size_t(ch) * stride + std::size_t(k)]); },
+      v_colour, [&](int ch, int k, double v) { v_sh[std::size_t(ch) * stride + std::size_t(k)] = S(v); }, v_mean);
+  for (int ch = 0; ch < count; ++ch)
+    for (int k = sh_coeffs_for_degree(deg); k < k_total; ++k) v_sh[std::size_t(ch) * stride + std::size_t(k)] = S(0);
 }
 
 }  // namespace msgs

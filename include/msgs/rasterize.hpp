@@ -185,6 +185,34 @@ class Rasterizer {
         if constexpr (Opt.depth) pg.depth[l] = acc[l][Rec::depth(count)];
       }
       detail::project_bwd_lanes<Opt.antialiased>(geo, pcam, pg, gg, /*known_visible=*/true);
+      // Colour backward for the whole vector: dL/dSH into the band planes, dL/d(mean) through the
+      // view direction added to gg.mean.
+      {
+        using LD = detail::Lanes<D>;
+        const D raw[3] = {geo.mean[0] - LD::splat(pcam.position[0]), geo.mean[1] - LD::splat(pcam.position[1]),
+                          geo.mean[2] - LD::splat(pcam.position[2])};
+        D v_colour[kBands];
+        for (int ch = 0; ch < count; ++ch) {
+          v_colour[ch] = LD::splat(0.0);
+          for (int l = 0; l < n; ++l) v_colour[ch][l] = acc[l][Rec::kBase + ch];
+        }
+        detail::colour_bwd_lanes<D>(
+            count, deg, raw,
+            [&](int ch, int k) {
+              D c;
+              for (int l = 0; l < L; ++l) c[l] = double(model.sh_row(ids[l], first + ch)[k]);
+              return c;
+            },
+            v_colour,
+            [&](int ch, int k, const D& v) {
+              for (int l = 0; l < n; ++l) grads.model.sh_row(ids[l], first + ch)[k] = S(v[l]);
+            },
+            gg.mean);
+        const int K = sh_coeffs_for_degree(deg);
+        if (K < G::sh_coeffs)  // coefficients above the active degree: zero
+          for (int l = 0; l < n; ++l)
+            for (int ch = 0; ch < count; ++ch) std::fill_n(grads.model.sh_row(ids[l], first + ch) + K, G::sh_coeffs - K, S(0));
+      }
       for (int l = 0; l < n; ++l) {
         const std::uint32_t g = ids[l];
         grads.mean2d[2 * g] = S(pg.mean2d[0][l]);
@@ -193,12 +221,8 @@ class Rasterizer {
           grads.absgrad[2 * g] = S(acc[l][Rec::abs_x(count)]);
           grads.absgrad[2 * g + 1] = S(acc[l][Rec::abs_x(count) + 1]);
         }
-        Eigen::Vector3d v_mean(gg.mean[0][l], gg.mean[1][l], gg.mean[2][l]);
-        const Eigen::Vector3d mean(geo.mean[0][l], geo.mean[1][l], geo.mean[2][l]);
-        colour_bwd(model.sh_row(g, first), model.sh_plane_stride(), count, deg, G::sh_coeffs, mean - pcam.position,
-                   acc[l] + Rec::kBase, grads.model.sh_row(g, first), v_mean);
         for (int i = 0; i < 3; ++i) {
-          grads.model.means[3 * g + i] = S(v_mean[i]);
+          grads.model.means[3 * g + i] = S(gg.mean[i][l]);
           grads.model.log_scales[3 * g + i] = S(gg.log_scale[i][l]);
         }
         for (int i = 0; i < 4; ++i) grads.model.quats[4 * g + i] = S(gg.quat[i][l]);
@@ -289,8 +313,6 @@ class Rasterizer {
     constexpr int L = detail::kProjLanes;
     const std::int64_t N = std::int64_t(model.size()), batches = (N + L - 1) / L;
     const int first = first_, count = count_, deg = sh_degree_;
-    const int K = sh_coeffs_for_degree(deg);
-    const std::size_t stride = model.sh_plane_stride();
 #pragma omp parallel for schedule(dynamic, 128)
     for (std::int64_t bi = 0; bi < batches; ++bi) {
       const std::int64_t i0 = bi * L;
@@ -301,30 +323,38 @@ class Rasterizer {
       detail::gather_geometry(model, ids, geo);
       detail::ProjectedLanes<D> pl;
       const auto visible = detail::project_lanes<Opt.antialiased>(geo, pcam_, pl, nullptr, false);
+      // Colour of the rendered channels for the whole vector (SH coefficients gathered from the
+      // band planes); a lane with a non-finite active coefficient is culled.
+      using LD = detail::Lanes<D>;
+      auto sh_finite = LD::not_(visible);
+      D col[kBands];
+      if (LD::any(visible)) {
+        sh_finite = visible;
+        D dir[3] = {LD::splat(0.0), LD::splat(0.0), LD::splat(1.0)};
+        if constexpr (G::sh_degree > 0) {
+          if (deg > 0) {
+            const D raw[3] = {geo.mean[0] - LD::splat(pcam_.position[0]), geo.mean[1] - LD::splat(pcam_.position[1]),
+                              geo.mean[2] - LD::splat(pcam_.position[2])};
+            D len;
+            detail::view_dir(raw, dir, len);
+          }
+        }
+        detail::colour_fwd_lanes<D>(count, deg, dir, [&](int ch, int k) {
+          D c;
+          for (int l = 0; l < L; ++l) c[l] = double(model.sh_row(ids[l], first + ch)[k]);
+          sh_finite = detail::mand(sh_finite, detail::lfinite(c));
+          return c;
+        }, col);
+      }
       for (int l = 0; l < n; ++l) {
         const std::size_t i = ids[l];
         rects_[i] = PixelRect{};  // culled until shown otherwise
         radii_[2 * i] = radii_[2 * i + 1] = 0;
         visible_flag_[i] = 0;
-        if (!visible[l]) continue;
-        const S* sh = model.sh_row(i, first);
-        bool finite = true;
-        for (int ch = 0; ch < count; ++ch)
-          for (int k = 0; k < K; ++k) finite = finite && std::isfinite(double(sh[std::size_t(ch) * stride + std::size_t(k)]));
-        if (!finite) continue;
+        if (!visible[l] || !sh_finite[l]) continue;
         const double mx = pl.mean2d[0][l], my = pl.mean2d[1][l], ex = pl.extent[0][l], ey = pl.extent[1][l];
         const PixelRect rect = pixel_rect(mx, my, ex, ey, grid_.width, grid_.height);
         if (rect.empty()) continue;
-        double dir[3] = {0, 0, 1};
-        if constexpr (G::sh_degree > 0) {
-          if (deg > 0) {
-            const Eigen::Vector3d d = Eigen::Vector3d(geo.mean[0][l], geo.mean[1][l], geo.mean[2][l]) - pcam_.position;
-            const double len = d.norm();
-            if (len > 0) { dir[0] = d[0] / len; dir[1] = d[1] / len; dir[2] = d[2] / len; }
-          }
-        }
-        double col[kBands];
-        colour_fwd(sh, stride, count, deg, dir, col);
         Splat<S>& s = splats_[i];
         s.mx = S(mx); s.my = S(my);
         s.a = S(pl.conic[0][l]); s.b = S(pl.conic[1][l]); s.c = S(pl.conic[2][l]);
@@ -333,7 +363,7 @@ class Rasterizer {
         set_sigma_cut(s, pl.support[l]);
         s.rect = rect;
         depth_[i] = S(pl.depth[l]);
-        for (int ch = 0; ch < count; ++ch) colours_[i * std::size_t(count) + std::size_t(ch)] = S(col[ch]);
+        for (int ch = 0; ch < count; ++ch) colours_[i * std::size_t(count) + std::size_t(ch)] = S(col[ch][l]);
         rects_[i] = rect;
         radii_[2 * i] = std::int32_t(std::min(std::ceil(ex), 1e9));
         radii_[2 * i + 1] = std::int32_t(std::min(std::ceil(ey), 1e9));
