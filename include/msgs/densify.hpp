@@ -144,8 +144,8 @@ namespace detail {
 /// each (one plane for most arrays, the band planes for SH), in one pass into a new array.
 template <class T>
 void apply_rows_impl(const RefinePlan& plan, std::vector<T>& rows, std::size_t width, bool zero_fresh,
-                     const char* what, std::size_t planes = 1) {
-  plan.validate();
+                     const char* what, std::size_t planes = 1, bool validated = false) {
+  if (!validated) plan.validate();
   if (rows.size() != planes * plan.input_size * width)
     throw std::invalid_argument(std::string(what) + ": array has " + std::to_string(rows.size()) + " values, plan expects " +
                                 std::to_string(planes) + " x " + std::to_string(plan.input_size) + " rows of " +
@@ -195,8 +195,9 @@ void apply_rows_zero_fresh(const RefinePlan& plan, std::vector<T>& rows, std::si
 template <class G, class S>
 void apply(const RefinePlan& plan, GaussianModel<G, S>& model) {
   model.check_consistent();
+  plan.validate();
   detail::for_each_array(model, [&](auto& v, std::size_t w, std::size_t planes) {
-    detail::apply_rows_impl(plan, v, w, false, "apply(model)", planes);
+    detail::apply_rows_impl(plan, v, w, false, "apply(model)", planes, true);
   });
 }
 
@@ -205,8 +206,9 @@ void apply(const RefinePlan& plan, GaussianModel<G, S>& model) {
 template <class G, class S>
 void apply_zero_fresh(const RefinePlan& plan, GaussianModel<G, S>& state) {
   state.check_consistent();
+  plan.validate();
   detail::for_each_array(state, [&](auto& v, std::size_t w, std::size_t planes) {
-    detail::apply_rows_impl(plan, v, w, true, "apply_zero_fresh(state)", planes);
+    detail::apply_rows_impl(plan, v, w, true, "apply_zero_fresh(state)", planes, true);
   });
 }
 
@@ -618,13 +620,23 @@ class DensityControl {
     // ---- growth decisions on the current set ----
     std::vector<bool> dup(n, false), split(n, false);
     const double small_limit = cfg_.grow_scale3d * scene_scale_;
-    for (std::size_t i = 0; i < n; ++i) {
-      const bool high = stats_.max_average(i) > cfg_.grow_grad2d;
-      const bool small = max_scale(model, i) <= small_limit;
-      dup[i] = high && small;
-      // gsplat ORs the screen rule in regardless of size: a small, high-gradient Gaussian that is
-      // also large on screen is cloned and split (three Gaussians).
-      split[i] = (high && !small) || (screen && double(stats_.max_radius(i)) > cfg_.grow_scale2d);
+    {
+      std::vector<std::uint8_t> flags(n);  // bit 0 duplicate, bit 1 split; bytes, so threads can write them
+      const std::ptrdiff_t sn = static_cast<std::ptrdiff_t>(n);
+#pragma omp parallel for schedule(static, 4096)
+      for (std::ptrdiff_t ii = 0; ii < sn; ++ii) {
+        const std::size_t i = static_cast<std::size_t>(ii);
+        const bool high = stats_.max_average(i) > cfg_.grow_grad2d;
+        const bool small = max_scale(model, i) <= small_limit;
+        // gsplat ORs the screen rule in regardless of size: a small, high-gradient Gaussian that is
+        // also large on screen is cloned and split (three Gaussians).
+        const bool sp = (high && !small) || (screen && double(stats_.max_radius(i)) > cfg_.grow_scale2d);
+        flags[i] = std::uint8_t((high && small ? 1 : 0) | (sp ? 2 : 0));
+      }
+      for (std::size_t i = 0; i < n; ++i) {
+        dup[i] = flags[i] & 1;
+        split[i] = flags[i] & 2;
+      }
     }
     if (cfg_.max_gaussians > 0) limit_growth(n, dup, split);
     for (std::size_t i = 0; i < n; ++i) {
@@ -663,9 +675,12 @@ class DensityControl {
     // ---- prune on the grown set ----
     std::vector<float> radius = stats_.max_radii();  // [N] follows the growth: copies inherit
     apply_rows(plan, radius, 1);
-    std::vector<bool> prune(grown, false);
+    std::vector<std::uint8_t> prune_flag(grown, 0);
     const double big_limit = cfg_.prune_scale3d * scene_scale_;
-    for (std::size_t r = 0; r < grown; ++r) {
+    const std::ptrdiff_t sgrown = static_cast<std::ptrdiff_t>(grown);
+#pragma omp parallel for schedule(static, 4096)
+    for (std::ptrdiff_t rr = 0; rr < sgrown; ++rr) {
+      const std::size_t r = static_cast<std::size_t>(rr);
       const std::size_t src = plan.source[r];
       const S* ls = r < rest ? &model.log_scales[3 * src] : &sample_log_scale[3 * (r - rest)];
       const double o = detail::sigmoid(double(model.opacity_logits[src]));
@@ -675,8 +690,12 @@ class DensityControl {
         p = p || max_scale(ls) > big_limit;
         if (screen) p = p || double(radius[r]) > cfg_.prune_scale2d;
       }
-      prune[r] = p;
-      counts.pruned += p;
+      prune_flag[r] = p;
+    }
+    std::vector<bool> prune(grown, false);
+    for (std::size_t r = 0; r < grown; ++r) {
+      prune[r] = prune_flag[r] != 0;
+      counts.pruned += prune_flag[r];
     }
     const RefinePlan p_prune = RefinePlan::remove(prune);
     plan = plan.then(p_prune);

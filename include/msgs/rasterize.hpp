@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -196,22 +197,13 @@ class Rasterizer {
           v_colour[ch] = LD::splat(0.0);
           for (int l = 0; l < n; ++l) v_colour[ch][l] = acc[l][Rec::kBase + ch];
         }
-        detail::colour_bwd_lanes<D>(
-            count, deg, raw,
-            [&](int ch, int k) {
-              D c;
-              for (int l = 0; l < L; ++l) c[l] = double(model.sh_row(ids[l], first + ch)[k]);
-              return c;
-            },
-            v_colour,
-            [&](int ch, int k, const D& v) {
-              for (int l = 0; l < n; ++l) grads.model.sh_row(ids[l], first + ch)[k] = S(v[l]);
-            },
-            gg.mean);
         const int K = sh_coeffs_for_degree(deg);
-        if (K < G::sh_coeffs)  // coefficients above the active degree: zero
-          for (int l = 0; l < n; ++l)
-            for (int ch = 0; ch < count; ++ch) std::fill_n(grads.model.sh_row(ids[l], first + ch) + K, G::sh_coeffs - K, S(0));
+        ShLanes cf, v_sh;
+        cf.gather(model, ids, first, count, K);
+        detail::colour_bwd_lanes<D>(
+            count, deg, raw, [&](int ch, int k) { return cf.load(ch, k); }, v_colour,
+            [&](int ch, int k, const D& v) { v_sh.store(ch, k, v); }, gg.mean);
+        v_sh.scatter(grads.model, ids, n, first, count, K);  // coefficients above the active degree: zero
       }
       for (int l = 0; l < n; ++l) {
         const std::uint32_t g = ids[l];
@@ -339,9 +331,10 @@ class Rasterizer {
             detail::view_dir(raw, dir, len);
           }
         }
+        ShLanes cf;
+        cf.gather(model, ids, first, count, sh_coeffs_for_degree(deg));
         detail::colour_fwd_lanes<D>(count, deg, dir, [&](int ch, int k) {
-          D c;
-          for (int l = 0; l < L; ++l) c[l] = double(model.sh_row(ids[l], first + ch)[k]);
+          const D c = cf.load(ch, k);
           sh_finite = detail::mand(sh_finite, detail::lfinite(c));
           return c;
         }, col);
@@ -443,6 +436,39 @@ class Rasterizer {
       for (int ch = first; ch < last; ++ch) std::fill_n(m.sh_row(i, ch), G::sh_coeffs, S(0));
     }
   }
+
+  /// SH coefficients of the rendered channels of a vector of Gaussians, lane-minor ([channel,
+  /// coefficient, lane]) so that a coefficient of all lanes is one vector load; gathered from and
+  /// scattered to the band planes one Gaussian's contiguous row at a time.
+  struct ShLanes {
+    static constexpr int L = detail::kProjLanes;
+    alignas(64) double v[kBands][G::sh_coeffs][L];
+
+    template <class M>
+    void gather(const M& m, const std::uint32_t* ids, int first, int count, int K) {
+      for (int ch = 0; ch < count; ++ch)
+        for (int l = 0; l < L; ++l) {
+          const S* row = m.sh_row(ids[l], first + ch);
+          for (int k = 0; k < K; ++k) v[ch][k][l] = double(row[k]);
+        }
+    }
+    detail::ProjVec load(int ch, int k) const {
+      detail::ProjVec d;
+      std::memcpy(&d, v[ch][k], sizeof d);
+      return d;
+    }
+    void store(int ch, int k, const detail::ProjVec& d) { std::memcpy(v[ch][k], &d, sizeof d); }
+    /// Write the first n lanes' K coefficients of each channel into `g`, zeros above K.
+    template <class M>
+    void scatter(M& g, const std::uint32_t* ids, int n, int first, int count, int K) const {
+      for (int ch = 0; ch < count; ++ch)
+        for (int l = 0; l < n; ++l) {
+          S* row = g.sh_row(ids[l], first + ch);
+          for (int k = 0; k < K; ++k) row[k] = S(v[ch][k][l]);
+          for (int k = K; k < G::sh_coeffs; ++k) row[k] = S(0);
+        }
+    }
+  };
 
   RasterTimings timings_;
   // Settings of the last forward.
