@@ -641,3 +641,35 @@ TEST_CASE("presets and validation") {
   CHECK_THROWS_AS(DensityControl(a, 0, 10), std::invalid_argument);
   CHECK_THROWS_AS(DensityControl(a, 1, 10, 0.0), std::invalid_argument);
 }
+
+TEST_CASE("statistics over a row list equal the statistics over every row when the others were not seen") {
+  const std::size_t n = 9000;  // several parallel chunks
+  std::vector<float> g(2 * n);
+  std::vector<std::int32_t> radii(2 * n, 0);
+  std::vector<std::uint32_t> rows;
+  for (std::size_t i = 0; i < n; ++i) {
+    g[2 * i] = float(i % 13) * 0.01f - 0.05f;
+    g[2 * i + 1] = float(i % 7) * 0.02f;
+    if (i % 3 != 1) {  // seen
+      radii[2 * i] = 1 + int(i % 5);
+      radii[2 * i + 1] = 2;
+      rows.push_back(std::uint32_t(i));
+    } else {
+      g[2 * i] = std::numeric_limits<float>::quiet_NaN();  // stale gradients of rows the view did not see
+    }
+  }
+  g[2 * 3] = std::numeric_limits<float>::infinity();  // a seen row with a non-finite gradient is skipped either way
+  DensityStats all(n, 2), listed(n, 2);
+  for (int band : {0, 1, 0}) {
+    all.add(band, g, radii, 640, 480);
+    listed.add(band, g, radii, 640, 480, &rows);
+  }
+  CHECK(all.grad_sums() == listed.grad_sums());
+  CHECK(all.counts() == listed.counts());
+  CHECK(all.max_radii() == listed.max_radii());
+  CHECK(listed.count(0, 0) == 2);
+  CHECK(listed.count(1, 0) == 0);
+  CHECK(listed.count(3, 0) == 0);
+  const std::vector<std::uint32_t> outside = {std::uint32_t(n)};
+  CHECK_THROWS_AS(listed.add(0, g, radii, 640, 480, &outside), std::invalid_argument);
+}

@@ -307,3 +307,27 @@ TEST_CASE("scale regulariser on a model adds into grad.log_scales only") {
   CHECK(g.means[0] == 0.0f);
   CHECK(msgs::scale_reg(m, static_cast<msgs::GaussianModel<G, float>*>(nullptr)) == doctest::Approx(v));
 }
+
+TEST_CASE("scale regulariser over a row list: those rows only, normalised by N, others untouched") {
+  const std::size_t n = 5000;
+  std::vector<float> ls(3 * n), g_all(3 * n, 0.0f), g_rows(3 * n, 7.0f);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> u(-4.0f, 4.0f);
+  for (float& v : ls) v = u(rng);
+  std::vector<std::uint32_t> rows;
+  for (std::size_t i = 0; i < n; i += 2) rows.push_back(std::uint32_t(i));
+  // The reference: every row, with the unlisted rows made isotropic (no penalty, no gradient).
+  std::vector<float> ls_masked = ls;
+  for (std::size_t i = 1; i < n; i += 2) ls_masked[3 * i] = ls_masked[3 * i + 1] = ls_masked[3 * i + 2] = 0.0f;
+  const double want = msgs::scale_reg<float>(ls_masked, g_all);
+  const double got = msgs::scale_reg<float>(ls, g_rows, {}, &rows);
+  CHECK(got == doctest::Approx(want).epsilon(1e-12));
+  for (std::size_t i = 0; i < n; ++i)
+    for (int a = 0; a < 3; ++a) {
+      const float r = g_rows[3 * i + std::size_t(a)];
+      if (i % 2 == 0) CHECK(r - 7.0f == doctest::Approx(g_all[3 * i + std::size_t(a)]).epsilon(1e-5));
+      else CHECK(r == 7.0f);
+    }
+  const std::vector<std::uint32_t> outside = {std::uint32_t(n)};
+  CHECK_THROWS_AS(msgs::scale_reg<float>(ls, g_rows, {}, &outside), std::invalid_argument);
+}
