@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <random>
 #include <vector>
 
 #include "msgs/densify.hpp"
@@ -672,4 +673,41 @@ TEST_CASE("statistics over a row list equal the statistics over every row when t
   CHECK(listed.count(3, 0) == 0);
   const std::vector<std::uint32_t> outside = {std::uint32_t(n)};
   CHECK_THROWS_AS(listed.add(0, g, radii, 640, 480, &outside), std::invalid_argument);
+}
+
+TEST_CASE("in-place row application equals a plain out-of-place copy for random plans, planes, growth and shrinkage") {
+  std::mt19937 rng(11);
+  for (int trial = 0; trial < 200; ++trial) {
+    const std::size_t n = 1 + rng() % 60, planes = 1 + rng() % 3, w = 1 + rng() % 5;
+    // A refinement-like plan (ascending survivors, then copies, fresh and new rows) or an arbitrary one.
+    RefinePlan plan;
+    plan.input_size = n;
+    const bool arbitrary = trial % 4 == 3;
+    for (std::size_t i = 0; i < n; ++i)
+      if (arbitrary ? rng() % 3 != 0 : rng() % 4 != 0) {
+        plan.source.push_back(arbitrary ? std::uint32_t(rng() % n) : std::uint32_t(i));
+        plan.fresh.push_back(false);
+      }
+    const std::size_t extra = rng() % (2 * n);
+    for (std::size_t e = 0; e < extra; ++e) {
+      const bool none = rng() % 5 == 0;
+      plan.source.push_back(none ? RefinePlan::none : std::uint32_t(rng() % n));
+      plan.fresh.push_back(none || rng() % 2 == 0);
+    }
+    std::vector<float> rows(planes * n * w);
+    for (std::size_t k = 0; k < rows.size(); ++k) rows[k] = float(k) + 0.5f;
+    for (const bool zero_fresh : {false, true}) {
+      INFO("trial ", trial, " zero_fresh ", zero_fresh);
+      std::vector<float> want(planes * plan.size() * w, 0.0f);
+      for (std::size_t q = 0; q < planes; ++q)
+        for (std::size_t i = 0; i < plan.size(); ++i) {
+          const std::uint32_t s = plan.source[i];
+          if (s == RefinePlan::none || (zero_fresh && plan.fresh[i])) continue;
+          for (std::size_t a = 0; a < w; ++a) want[(q * plan.size() + i) * w + a] = rows[(q * n + s) * w + a];
+        }
+      std::vector<float> got = rows;
+      detail::apply_rows_impl(plan, got, w, zero_fresh, "test", planes);
+      CHECK(got == want);
+    }
+  }
 }

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -141,29 +142,59 @@ struct RefinePlan {
 
 namespace detail {
 /// Apply `plan` to `rows`, `planes` consecutive planes of plan.input_size rows of `width` values
-/// each (one plane for most arrays, the band planes for SH), in one pass into a new array.
+/// each (one plane for most arrays, the band planes for SH), in place: no new array of the model's
+/// size, so a refinement costs the rows that move, not an allocation (and its page faults) per
+/// array. The leading output rows that copy old rows in ascending order (the surviving Gaussians
+/// of a refinement) are compacted in place, a run of consecutive rows per memmove; the other
+/// output rows (copies, split samples, fresh rows) are staged in a buffer of their own size first.
 template <class T>
 void apply_rows_impl(const RefinePlan& plan, std::vector<T>& rows, std::size_t width, bool zero_fresh,
                      const char* what, std::size_t planes = 1, bool validated = false) {
   if (!validated) plan.validate();
-  if (rows.size() != planes * plan.input_size * width)
+  const std::size_t n = plan.input_size, m = plan.size(), w = width;
+  if (rows.size() != planes * n * w)
     throw std::invalid_argument(std::string(what) + ": array has " + std::to_string(rows.size()) + " values, plan expects " +
-                                std::to_string(planes) + " x " + std::to_string(plan.input_size) + " rows of " +
+                                std::to_string(planes) + " x " + std::to_string(n) + " rows of " +
                                 std::to_string(width));
-  std::vector<T> out(planes * plan.size() * width, T(0));  // fresh rows stay zero
-  const std::ptrdiff_t n_out = static_cast<std::ptrdiff_t>(plan.size());
+  // Leading rows copied in place: ascending sources at or after their output row.
+  std::size_t kept = 0;
+  for (std::uint32_t prev = 0; kept < m; ++kept) {
+    const std::uint32_t s = plan.source[kept];
+    if (s == RefinePlan::none || (zero_fresh && plan.fresh[kept]) || s < kept || (kept > 0 && s <= prev)) break;
+    prev = s;
+  }
+  const std::size_t tail = m - kept;
+  std::vector<T> staged(planes * tail * w, T(0));  // zero for fresh rows
+  for (std::size_t q = 0; q < planes; ++q)
+    for (std::size_t t = 0; t < tail; ++t) {
+      const std::uint32_t s = plan.source[kept + t];
+      if (s == RefinePlan::none || (zero_fresh && plan.fresh[kept + t])) continue;
+      std::copy_n(rows.data() + (q * n + s) * w, w, staged.data() + (q * tail + t) * w);
+    }
+  // Compact each plane's kept rows towards its start (destination <= source, ascending).
   for (std::size_t q = 0; q < planes; ++q) {
-    const T* in = rows.data() + q * plan.input_size * width;
-    T* o = out.data() + q * plan.size() * width;
-#pragma omp parallel for schedule(static, 4096)
-    for (std::ptrdiff_t ii = 0; ii < n_out; ++ii) {
-      const std::size_t i = static_cast<std::size_t>(ii);
-      const std::uint32_t s = plan.source[i];
-      if (s == RefinePlan::none || (zero_fresh && plan.fresh[i])) continue;
-      std::copy_n(in + std::size_t(s) * width, width, o + i * width);
+    T* base = rows.data() + q * n * w;
+    for (std::size_t f = 0; f < kept;) {
+      const std::size_t s = plan.source[f];
+      std::size_t e = f + 1;
+      while (e < kept && plan.source[e] == s + (e - f)) ++e;  // a run of consecutive sources
+      if (s != f) std::memmove(base + f * w, base + s * w, (e - f) * w * sizeof(T));
+      f = e;
     }
   }
-  rows.swap(out);
+  // Planes to their new stride m (upwards from the last plane when growing, downwards otherwise).
+  if (planes * m * w > rows.capacity()) rows.reserve(planes * m * w + planes * m * w / 4);  // room for later growth
+  if (m > n) {
+    rows.resize(planes * m * w);
+    for (std::size_t q = planes; q-- > 1;)
+      std::memmove(rows.data() + q * m * w, rows.data() + q * n * w, kept * w * sizeof(T));
+  } else {
+    for (std::size_t q = 1; q < planes; ++q)
+      std::memmove(rows.data() + q * m * w, rows.data() + q * n * w, kept * w * sizeof(T));
+    rows.resize(planes * m * w);
+  }
+  for (std::size_t q = 0; q < planes; ++q)
+    std::copy_n(staged.data() + q * tail * w, tail * w, rows.data() + (q * m + kept) * w);
 }
 
 /// Calls f(array, row width, planes) for every per-Gaussian array of a model (SH: one plane per band).

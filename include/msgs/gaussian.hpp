@@ -95,6 +95,17 @@ struct GaussianModel {
     sh.swap(planes);
   }
 
+  /// Resize every array to `n` Gaussians without keeping the values in place: the contents are
+  /// unspecified (band planes shift), there is no copy. For buffers that are rewritten anyway
+  /// (gradients); `resize` keeps values.
+  void reshape(std::size_t n) {
+    means.resize(n * 3);
+    log_scales.resize(n * 3);
+    quats.resize(n * 4);
+    opacity_logits.resize(n);
+    sh.resize(n * static_cast<std::size_t>(G::sh_floats));
+  }
+
   /// Fill every array with zero (keeps the size); used for gradient buffers.
   void set_zero() {
     for (auto* v : {&means, &log_scales, &quats, &opacity_logits, &sh}) v->assign(v->size(), S(0));

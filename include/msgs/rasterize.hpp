@@ -55,7 +55,9 @@ enum class GradientFill { dense, visible };
 /// Gradients produced by Rasterizer::backward.
 template <class G, class S>
 struct Gradients {
-  GaussianModel<G, S> model;  ///< dL/d parameters; SH of channels outside the rendered range untouched
+  /// dL/d parameters. SH of channels outside the rendered range are left as they were, or
+  /// unspecified when the model's size changed since the previous backward into this object.
+  GaussianModel<G, S> model;
   std::vector<S> mean2d;      ///< [N, 2] dL/d(projected mean, pixels)
   std::vector<S> absgrad;     ///< [N, 2] sum over pixels of |per-pixel dL/d(mean2d)|, per component; empty
                               ///< unless RasterOptions::absgrad
@@ -112,7 +114,7 @@ class Rasterizer {
     const auto t0 = clock::now();
     const Model& model = *model_;
     const std::size_t N = model.size();
-    if (grads.model.size() != N) grads.model.resize(N);
+    if (grads.model.size() != N) grads.model.reshape(N);  // every row read below is written below
     grads.mean2d.resize(2 * N);
     if constexpr (Opt.absgrad) grads.absgrad.resize(2 * N);
     else grads.absgrad.clear();
