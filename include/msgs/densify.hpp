@@ -171,8 +171,12 @@ void apply_rows_impl(const RefinePlan& plan, std::vector<T>& rows, std::size_t w
       if (s == RefinePlan::none || (zero_fresh && plan.fresh[kept + t])) continue;
       std::copy_n(rows.data() + (q * n + s) * w, w, staged.data() + (q * tail + t) * w);
     }
-  // Compact each plane's kept rows towards its start (destination <= source, ascending).
-  for (std::size_t q = 0; q < planes; ++q) {
+  // Compact each plane's kept rows towards its start (destination <= source, ascending); the planes
+  // are disjoint, so they are compacted in parallel.
+  const std::ptrdiff_t splanes = static_cast<std::ptrdiff_t>(planes);
+#pragma omp parallel for schedule(static, 1) if (planes > 1)
+  for (std::ptrdiff_t sq = 0; sq < splanes; ++sq) {
+    const std::size_t q = static_cast<std::size_t>(sq);
     T* base = rows.data() + q * n * w;
     for (std::size_t f = 0; f < kept;) {
       const std::size_t s = plan.source[f];
