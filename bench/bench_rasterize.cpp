@@ -37,13 +37,7 @@ constexpr SizeCase kSizes[] = {
     {1000000, 1280, 720, "1M_1280x720"},
 };
 
-SceneSpec spec_of(int size) {
-  SceneSpec s;
-  s.n = kSizes[size].n;
-  s.width = kSizes[size].width;
-  s.height = kSizes[size].height;
-  return s;
-}
+SceneSpec spec_of(int size) { return bench::scene_spec(kSizes[size].n, kSizes[size].width, kSizes[size].height); }
 
 /// One model per Gaussian type, rebuilt only when the size changes (benchmarks run in
 /// registration order, grouped by size), so setup stays outside the timed loops and memory

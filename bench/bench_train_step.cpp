@@ -60,13 +60,7 @@ constexpr SizeCase kSizes[] = {
     {1000000, 1280, 960, "1M_1280x960", true},
 };
 
-SceneSpec spec_of(int size) {
-  SceneSpec s;
-  s.n = kSizes[size].n;
-  s.width = kSizes[size].width;
-  s.height = kSizes[size].height;
-  return s;
-}
+SceneSpec spec_of(int size) { return bench::scene_spec(kSizes[size].n, kSizes[size].width, kSizes[size].height); }
 
 /// The family model, or with `half` the family model with about half of the Gaussians (a seeded
 /// coin per Gaussian, from its own stream so every band count moves the same ones) moved sideways

@@ -23,6 +23,15 @@ struct SceneSpec {
   double sh_rest = 0.02;  ///< higher-order SH coefficients uniform in +-sh_rest
 };
 
+/// The family member of `n` Gaussians at width x height, default seed.
+inline SceneSpec scene_spec(std::size_t n, int width, int height) {
+  SceneSpec s;
+  s.n = n;
+  s.width = width;
+  s.height = height;
+  return s;
+}
+
 /// Camera at the origin looking down +z (R = I, t = 0), fx = fy = 0.8 W, principal point centred.
 template <class S>
 Camera<S> family_camera(const SceneSpec& spec) {

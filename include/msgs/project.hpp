@@ -726,8 +726,9 @@ inline void view_dir(const D raw[3], D dir[3], D& len) {
   dir[2] = L::sel(ok, raw[2] / len, L::splat(1.0));
 }
 
-/// Colour of `count` channels in lane type D: SH of degree `deg` along the unit direction `dir`,
-/// plus 0.5, clamped at 0 (NaN becomes 0). `coef(ch, k)` gives coefficient k of channel ch.
+/// Colour of `count` channels in lane type D (one Gaussian with D = double, a vector register of
+/// them with ProjVec): SH of degree `deg` along the unit direction `dir`, plus 0.5, clamped at 0
+/// (NaN becomes 0). `coef(ch, k)` gives coefficient k of channel ch.
 template <class D, class Coef>
 inline void colour_fwd_lanes(int count, int deg, const D dir[3], Coef&& coef, D* out) {
   using L = Lanes<D>;
@@ -778,30 +779,5 @@ inline void colour_bwd_lanes(int count, int deg, const D raw[3], Coef&& coef, co
 }
 
 }  // namespace detail
-
-/// Colour of one Gaussian for `count` channels: SH (degree `deg`) evaluated along the unit view
-/// direction `dir`, plus 0.5, clamped at 0. `sh` points at the first channel's coefficients, K of
-/// them contiguous; the next channel's start `stride` values further (the band planes of
-/// GaussianModel: `model.sh_row(i, first)` and `model.sh_plane_stride()`). The rasteriser runs the
-/// same operations on a vector register of Gaussians (detail::colour_fwd_lanes).
-template <class S>
-inline void colour_fwd(const S* sh, std::size_t stride, int count, int deg, const double dir[3], double* out) {
-  detail::colour_fwd_lanes<double>(count, deg, dir,
-                                   [&](int ch, int k) { return double(sh[std::size_t(ch) * stride + std::size_t(k)]); }, out);
-}
-
-/// Backward of colour_fwd: writes dL/dSH of the `count` channels for the active coefficients
-/// (`v_sh`, same layout and stride as `sh`; the coefficients above degree `deg`, up to `k_total`,
-/// get zero) and adds dL/d(mean) through the view direction `raw_dir` = mean - camera position
-/// to `v_mean`.
-template <class S>
-inline void colour_bwd(const S* sh, std::size_t stride, int count, int deg, int k_total, const double raw_dir[3],
-                       const double* v_colour, S* v_sh, double v_mean[3]) {
-  detail::colour_bwd_lanes<double>(
-      count, deg, raw_dir, [&](int ch, int k) { return double(sh[std::size_t(ch) * stride + std::size_t(k)]); },
-      v_colour, [&](int ch, int k, double v) { v_sh[std::size_t(ch) * stride + std::size_t(k)] = S(v); }, v_mean);
-  for (int ch = 0; ch < count; ++ch)
-    for (int k = sh_coeffs_for_degree(deg); k < k_total; ++k) v_sh[std::size_t(ch) * stride + std::size_t(k)] = S(0);
-}
 
 }  // namespace msgs

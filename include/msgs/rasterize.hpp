@@ -320,10 +320,9 @@ class Rasterizer {
       // Colour of the rendered channels for the whole vector (SH coefficients gathered from the
       // band planes); a lane with a non-finite active coefficient is culled.
       using LD = detail::Lanes<D>;
-      auto sh_finite = LD::not_(visible);
+      auto drawn = visible;  // and every active coefficient of the rendered channels finite
       D col[kBands];
       if (LD::any(visible)) {
-        sh_finite = visible;
         D dir[3] = {LD::splat(0.0), LD::splat(0.0), LD::splat(1.0)};
         if constexpr (G::sh_degree > 0) {
           if (deg > 0) {
@@ -337,7 +336,7 @@ class Rasterizer {
         cf.gather(model, ids, first, count, sh_coeffs_for_degree(deg));
         detail::colour_fwd_lanes<D>(count, deg, dir, [&](int ch, int k) {
           const D c = cf.load(ch, k);
-          sh_finite = detail::mand(sh_finite, detail::lfinite(c));
+          drawn = detail::mand(drawn, detail::lfinite(c));
           return c;
         }, col);
       }
@@ -346,7 +345,7 @@ class Rasterizer {
         rects_[i] = PixelRect{};  // culled until shown otherwise
         radii_[2 * i] = radii_[2 * i + 1] = 0;
         visible_flag_[i] = 0;
-        if (!visible[l] || !sh_finite[l]) continue;
+        if (!drawn[l]) continue;
         const double mx = pl.mean2d[0][l], my = pl.mean2d[1][l], ex = pl.extent[0][l], ey = pl.extent[1][l];
         const PixelRect rect = pixel_rect(mx, my, ex, ey, grid_.width, grid_.height);
         if (rect.empty()) continue;
