@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include "commands.hpp"
+#include "data_options.hpp"
 #include "render_dispatch.hpp"
 #include "report.hpp"
 
@@ -16,6 +17,7 @@ namespace {
 
 constexpr const char* kUsage =
     "usage: msgs eval --data DIR --model PLY|DIR [--out DIR] [--bands LIST] [--orient none|center] [--no-sheets]\n"
+    "                 [--images NAME] [--eval-every N]\n"
     "\n"
     "Evaluate a trained model on the dataset's eval split at full resolution, with the reference\n"
     "evaluation background (grey 0.149, 0.165, 0.216; its luminance for single bands) and renders\n"
@@ -26,6 +28,7 @@ constexpr const char* kUsage =
     "                      then CIR, NDVI and NDRE of ground truth | render | difference\n"
     "LPIPS is not computed: it needs pretrained network weights that cannot be obtained offline.\n"
     "\n"
+    MSGS_DATA_OPTIONS_USAGE
     "  --model PLY|DIR     a model PLY or a directory of model_*.ply files (see `msgs render --help`)\n"
     "  --bands LIST        only these bands (comma separated ids)\n"
     "  --orient none       the model was trained with --orient none (or --no-orient)\n"
@@ -37,7 +40,7 @@ constexpr const char* kLpipsNote =
 using msgs::cli::split_list;
 
 int run_eval(const std::vector<std::string>& argv) {
-  const msgs::cli::Args args(argv, {"data", "model", "out", "bands", "orient"}, {"help", "no-orient", "no-sheets"});
+  const msgs::cli::Args args(argv, {"data", "images", "eval-every", "model", "out", "bands", "orient"}, {"help", "no-orient", "no-sheets"});
   if (args.flag("help")) { std::fputs(kUsage, stdout); return 0; }
   if (!args.positional().empty()) throw msgs::cli::UsageError("unexpected argument '" + args.positional()[0] + "'");
   namespace fs = std::filesystem;
@@ -50,7 +53,7 @@ int run_eval(const std::vector<std::string>& argv) {
   lo.orient_and_center = msgs::cli::orient_and_center(args);
   lo.bands = split_list(args.get("bands"));
   lo.load_points = false;
-  const msgs::io::Dataset ds = msgs::io::load_dataset(data, lo);
+  const msgs::io::Dataset ds = msgs::cli::load_data(args, lo, "eval");
   const msgs::ModelSet models = msgs::ModelSet::load(model, msgs::cli::make_any_renderer);
 
   msgs::OutputStage stage(out);

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "commands.hpp"
+#include "data_options.hpp"
 #include "render_dispatch.hpp"
 
 namespace {
@@ -16,7 +17,7 @@ namespace {
 constexpr const char* kUsage =
     "usage: msgs render --data DIR --model PLY|DIR --out DIR [--split train|eval|all] [--float]\n"
     "                   [--background V|V1,V2,..] [--sh-degree D] [--bands LIST] [--orient none|center]\n"
-    "                   [--no-composites] [--no-legend]\n"
+    "                   [--no-composites] [--no-legend] [--images NAME] [--eval-every N]\n"
     "\n"
     "Render every frame of the dataset (or one split) with its own camera at full resolution:\n"
     "  <stem>.png          8-bit PNG for the RGB band, 16-bit PNG for single bands\n"
@@ -27,6 +28,7 @@ constexpr const char* kUsage =
     "  NDVI_<n>.png        (NIR - R) / (NIR + R) on a red-yellow-green scale over [-1, 1]\n"
     "  NDRE_<n>.png        (NIR - RE) / (NIR + RE), same scale (+ raw .npy with --float)\n"
     "\n"
+    MSGS_DATA_OPTIONS_USAGE
     "  --model PLY|DIR     a model PLY, or a directory of model_*.ply files (as `msgs train` writes)\n"
     "                      Bands come from the PLY's band names; a PLY without them renders the RGB\n"
     "                      band (3 channels), the Joint layout (7) or any single band (1).\n"
@@ -55,7 +57,7 @@ std::vector<float> parse_background(const std::string& s) {
 }
 
 int run_render(const std::vector<std::string>& argv) {
-  const msgs::cli::Args args(argv, {"data", "model", "out", "split", "background", "sh-degree", "bands", "orient"},
+  const msgs::cli::Args args(argv, {"data", "images", "eval-every", "model", "out", "split", "background", "sh-degree", "bands", "orient"},
                              {"help", "float", "no-orient", "no-composites", "no-legend"});
   if (args.flag("help")) { std::fputs(kUsage, stdout); return 0; }
   if (!args.positional().empty()) throw msgs::cli::UsageError("unexpected argument '" + args.positional()[0] + "'");
@@ -78,7 +80,7 @@ int run_render(const std::vector<std::string>& argv) {
   lo.orient_and_center = msgs::cli::orient_and_center(args);
   lo.bands = split_list(args.get("bands"));
   lo.load_points = false;
-  const msgs::io::Dataset ds = msgs::io::load_dataset(data, lo);
+  const msgs::io::Dataset ds = msgs::cli::load_data(args, lo, "render");
   const msgs::ModelSet models = msgs::ModelSet::load(model, msgs::cli::make_any_renderer);
   for (const auto& b : ds.bands()) {
     if (!models.renders(b)) continue;

@@ -22,6 +22,7 @@
 #include <msgs/study.hpp>
 
 #include "commands.hpp"
+#include "data_options.hpp"
 #include "experiment.hpp"
 #include "render_dispatch.hpp"
 #include "report.hpp"
@@ -35,6 +36,7 @@ namespace st = msgs::study;
 constexpr const char* kUsage =
     "usage: msgs study ablation|crosstalk|cost --data DIR --out DIR [--scale F] [--jobs N]\n"
     "                  [--sh-degree D] [--seed S] [--resume] [--job-file PATH] [--msgs PATH] [--no-plot]\n"
+    "                  [--images NAME] [--eval-every N] [--geometry-band ID]\n"
     "       msgs study collect --out DIR [--no-plot]\n"
     "\n"
     "Studies over many training runs (every run is `msgs train` with one configuration):\n"
@@ -49,6 +51,8 @@ constexpr const char* kUsage =
     "summary.csv, summary.md, summary.json, <study>.gp and <study>_<band>.png (PSNR against wall\n"
     "time, Pareto front marked; needs gnuplot, else run `gnuplot <study>.gp` in DIR later).\n"
     "\n"
+    MSGS_DATA_OPTIONS_USAGE
+    "  --geometry-band ID  geometry band of every run (see `msgs train --help`; default D)\n"
     "  --scale F       schedule scale of the runs (default 0.01: a 1200-step Joint run)\n"
     "  --jobs N        runs at a time, as threads of this process; with N > 1 each run gets\n"
     "                  max(1, cores / N) OpenMP threads (default 1: one run on every core)\n"
@@ -112,9 +116,10 @@ int write_summaries(const fs::path& out, bool plot) {
 
 /// jobs file + Slurm array script; returns the number of lines.
 void write_job_files(const fs::path& job_file, const std::vector<st::StudyRun>& runs, const fs::path& exe,
-                     const fs::path& data, const fs::path& out, st::StudyKind kind) {
+                     const fs::path& data, const std::vector<std::string>& data_args, const fs::path& out,
+                     st::StudyKind kind) {
   std::string lines;
-  for (const auto& r : runs) lines += st::job_line(r, exe, data, out) + "\n";
+  for (const auto& r : runs) lines += st::job_line(r, exe, data, out, data_args) + "\n";
   msgs::io::write_text_atomic(job_file, lines);
   const fs::path jobs_abs = fs::absolute(job_file);
   const fs::path slurm = job_file.parent_path() / (job_file.stem().string() + "_slurm.sh");
@@ -164,7 +169,8 @@ bool finished(const fs::path& dir) {
 }
 
 int run_study(const std::vector<std::string>& argv) {
-  const msgs::cli::Args args(argv, {"data", "out", "scale", "jobs", "sh-degree", "seed", "job-file", "msgs"},
+  const msgs::cli::Args args(argv, {"data", "images", "eval-every", "geometry-band", "out", "scale", "jobs", "sh-degree", "seed",
+                              "job-file", "msgs"},
                              {"help", "resume", "no-plot", "quiet"});
   if (args.flag("help") || args.positional().empty()) { std::fputs(kUsage, stdout); return args.flag("help") ? 0 : 2; }
   if (args.positional().size() > 1) throw msgs::cli::UsageError("unexpected argument '" + args.positional()[1] + "'");
@@ -192,6 +198,10 @@ int run_study(const std::vector<std::string>& argv) {
   const long jobs = args.integer("jobs", 1);
   if (jobs < 1) throw msgs::cli::UsageError("--jobs must be >= 1");
   const fs::path data = fs::absolute(args.require("data"));
+  std::vector<std::string> data_args;  // passed on to every run (job lines included)
+  for (const char* k : {"images", "eval-every", "geometry-band"})
+    if (args.has(k)) { data_args.push_back(std::string("--") + k); data_args.push_back(args.get(k)); }
+  const std::string geometry_band = args.get("geometry-band", "D");
 
   const std::vector<st::StudyRun> runs = st::study_runs(kind, opt);
   fs::create_directories(out);
@@ -199,11 +209,11 @@ int run_study(const std::vector<std::string>& argv) {
 
   if (args.has("job-file")) {
     const fs::path exe = args.has("msgs") ? fs::path(args.get("msgs")) : self_executable();
-    write_job_files(args.get("job-file"), runs, exe, data, fs::absolute(out), kind);
+    write_job_files(args.get("job-file"), runs, exe, data, data_args, fs::absolute(out), kind);
     return 0;
   }
 
-  const msgs::io::Dataset ds = msgs::io::load_dataset(data);
+  const msgs::io::Dataset ds = msgs::cli::load_data(args, msgs::io::LoadOptions{}, "study");
   // Threads, not processes: the dataset is loaded once and shared read-only, failures are
   // collected here, and one Ctrl-C handler stops everything. OpenMP's thread count (nthreads-var)
   // is an ICV of each host thread: a std::thread starts from the initial value (OMP_NUM_THREADS or
@@ -241,6 +251,7 @@ int run_study(const std::vector<std::string>& argv) {
           cfg.strategy = r.strategy;
           cfg.scale = r.scale;
           cfg.bands = r.bands;
+          cfg.geometry_band = geometry_band;
           cfg.train.seed = r.seed;
           cfg.init.seed = std::uint32_t(r.seed);
           cfg.train.stop = &g_stop;

@@ -13,6 +13,7 @@
 #include <msgs/io/file.hpp>
 
 #include "commands.hpp"
+#include "data_options.hpp"
 #include "experiment.hpp"
 #include "render_dispatch.hpp"
 #include "report.hpp"
@@ -24,8 +25,9 @@ constexpr const char* kUsage =
     "usage: msgs train --data DIR --out DIR [--strategy NAME] [--scale F] [--sh-degree D]\n"
     "                  [--bands D,MS_G,...] [--seed S] [--orient none|center] [--resume] [--checkpoint-every N]\n"
     "                  [--sheets N] [--adam sparse|dense] [--lr-sh-dc X] [--max-gaussians N]\n"
+    "                  [--images NAME] [--eval-every N] [--geometry-band ID]\n"
     "\n"
-    "Train Gaussian splats on a multi-spectral dataset (nerfstudio-style layout) with one of the\n"
+    "Train Gaussian splats on a multi-spectral dataset (nerfstudio-style layout, or a COLMAP scene) with one of the\n"
     "paper's strategies, evaluate every band on the eval split and write to DIR:\n"
     "  model_<key>.ply   one per model (joint, or one per band for separate/split)\n"
     "  result.json       configuration, per-band metrics, Gaussian counts, time per stage\n"
@@ -34,6 +36,7 @@ constexpr const char* kUsage =
     "                    finished run: a row per band of ground truth | render | error, then CIR,\n"
     "                    NDVI and NDRE of ground truth | render | difference (as `msgs eval`)\n"
     "\n"
+    MSGS_DATA_OPTIONS_USAGE
     "  --strategy NAME   separate | split | split+extadc | joint[+sig][+specdelay][+extadc|+msad]\n"
     "                    or joint-optimized (= joint+specdelay+msad, the default)\n"
     "  --scale F         multiply every iteration count of the paper's schedule (default 0.05:\n"
@@ -43,6 +46,9 @@ constexpr const char* kUsage =
     "                    opacity < 0.1, reset to 0.2) or gsplat (3DGS/gsplat: grad 0.0002, prune < 0.005,\n"
     "                    reset to 0.01); MSAD and ExtADC modify either as in the paper\n"
     "  --bands LIST      train only these bands (comma separated ids)\n"
+    "  --geometry-band ID  the band SpecDelay trains first, SIG lets move geometry and Split copies\n"
+    "                    geometry from (default D, the RGB camera; a capture without one names\n"
+    "                    another, e.g. MS_NIR); other strategies ignore it\n"
     "  --max-gaussians N densification grows each model to at most N Gaussians, largest\n"
     "                    gradients first (default 0: no limit)\n"
     "  --lr-sh-dc X      Adam learning rate of the SH DC (base colour) coefficients (default 0.0025,\n"
@@ -69,8 +75,8 @@ using msgs::cli::split_list;
 
 int run_train(const std::vector<std::string>& argv) {
   const msgs::cli::Args args(argv,
-                             {"data", "out", "strategy", "scale", "sh-degree", "bands", "seed", "checkpoint-every", "orient", "densify",
-                              "sheets", "max-gaussians", "lr-sh-dc", "adam"},
+                             {"data", "images", "eval-every", "out", "strategy", "scale", "sh-degree", "bands", "seed", "checkpoint-every", "orient", "densify",
+                              "sheets", "max-gaussians", "lr-sh-dc", "adam", "geometry-band"},
                              {"help", "no-orient", "quiet", "resume"});
   if (args.flag("help")) { std::fputs(kUsage, stdout); return 0; }
   if (!args.positional().empty()) throw msgs::cli::UsageError("unexpected argument '" + args.positional()[0] + "'");
@@ -82,6 +88,7 @@ int run_train(const std::vector<std::string>& argv) {
   const long deg = args.integer("sh-degree", 3);
   if (deg < 0 || deg > 3) throw msgs::cli::UsageError("--sh-degree must be 0..3");
   cfg.bands = split_list(args.get("bands"));
+  cfg.geometry_band = args.get("geometry-band", "D");
   cfg.train.seed = std::uint64_t(args.integer("seed", 0));
   cfg.train.adam.lr_sh_dc = args.number("lr-sh-dc", cfg.train.adam.lr_sh_dc);
   if (!(std::isfinite(cfg.train.adam.lr_sh_dc) && cfg.train.adam.lr_sh_dc > 0))
@@ -114,8 +121,9 @@ int run_train(const std::vector<std::string>& argv) {
 
   msgs::io::LoadOptions lo;
   lo.orient_and_center = msgs::cli::orient_and_center(args);
-  const msgs::io::Dataset ds = msgs::io::load_dataset(data, lo);
+  const msgs::io::Dataset ds = msgs::cli::load_data(args, lo, "train");
 
+  msgs::validate_run(ds, cfg);  // before anything is written: missing bands, no geometry band
   std::vector<std::string> band_ids = cfg.bands.empty() ? ds.bands() : cfg.bands;
   const bool quiet = args.flag("quiet");
   cfg.train.on_progress = [&](const msgs::TrainProgress& p) {
@@ -138,6 +146,11 @@ int run_train(const std::vector<std::string>& argv) {
   j["seed"] = cfg.train.seed;
   j["lr_sh_dc"] = cfg.train.adam.lr_sh_dc;
   j["adam"] = adam_mode;
+  j["geometry_band"] = cfg.geometry_band;
+  j["layout"] = msgs::io::detect_scene(data).describe(data);
+  j["images"] = args.get("images", "images");
+  j["eval_images"] = std::count_if(ds.frames.begin(), ds.frames.end(),
+                                   [](const msgs::io::Frame& f) { return f.split == msgs::io::Split::eval; });
   j["transform"] = std::vector<float>(ds.transform.data(), ds.transform.data() + 16);
   msgs::io::write_text_atomic(out / "result.json", j.dump(2) + "\n");
   const std::string table = msgs::cli::metrics_markdown(res.metrics);

@@ -8,6 +8,7 @@
 #include <functional>
 
 #include "msgs/io/colmap.hpp"
+#include "msgs/io/load_scene.hpp"
 
 namespace fs = std::filesystem;
 using namespace msgs;
@@ -248,4 +249,69 @@ TEST_CASE("bad COLMAP: unsupported model, wrong parameter count, missing camera,
   dir = scratch("missing");
   msg = error_of([&] { (void)read_colmap(dir); });
   CHECK(msg.find("cameras") != std::string::npos);
+}
+
+TEST_CASE("load_scene: detects the layout, image folders of resized copies, grey photos") {
+  const auto root = scratch("scene");
+  fs::create_directories(root / "sparse" / "0");
+  fs::create_directories(root / "images");
+  write_binary_model(root / "sparse" / "0");
+  for (const auto& m : imgs) {
+    Image<float> im(40, 30, 3, 0.25f);
+    im.at(3, 4, 1) = 1.0f;
+    write_png8(root / "images" / m.name, im);
+  }
+  LoadOptions opt;
+  opt.orient_and_center = false;
+  SceneInfo info;
+  const Dataset full = load_scene(root, opt, "images", &info);
+  CHECK(info.layout == SceneLayout::colmap);
+  CHECK(info.binary);
+  CHECK(info.describe(root) == "COLMAP scene (sparse/0, binary)");
+  REQUIRE(full.frames.size() == 3);
+
+  // images_2 next to images/: the prepared half-size copies, as the dataset's default divisor.
+  fs::create_directories(root / "images_2");
+  for (const auto& m : imgs) write_png8(root / "images_2" / m.name, Image<float>(20, 15, 3, 0.5f));
+  const Dataset half = load_scene(root, opt, "images_2");
+  CHECK(half.downscale == 2);
+  CHECK(frame_camera(half, half.frames[1]).width == 20);
+  CHECK(load_frame_image(half, half.frames[1]).at(0, 0, 0) == doctest::Approx(0.5).epsilon(0.01));  // the copy, not 0.25
+
+  // Any other folder of resized copies: the intrinsics follow the size of its images.
+  fs::create_directories(root / "small");
+  for (const auto& m : imgs) write_png8(root / "small" / m.name, Image<float>(20, 15, 1, 0.75f));  // grey
+  const Dataset small = load_scene(root, opt, "small");
+  CHECK(small.downscale == 1);
+  for (std::size_t i = 0; i < 3; ++i) {
+    CHECK(small.frames[i].raw_camera.width == 20);
+    CHECK(small.frames[i].raw_camera.fx == doctest::Approx(full.frames[i].raw_camera.fx * 0.5f));
+    CHECK(small.frames[i].raw_camera.cy == doctest::Approx(full.frames[i].raw_camera.cy * 0.5f));
+  }
+  const Image<float> grey = load_frame_image(small, small.frames[1]);  // a grey photo of band D: R = G = B
+  REQUIRE(grey.channels == 3);
+  CHECK(grey.at(5, 5, 0) == doctest::Approx(0.75).epsilon(0.01));
+  CHECK(grey.at(5, 5, 2) == grey.at(5, 5, 0));
+  write_png8(root / "small" / "a.png", Image<float>(20, 20, 3, 0.5f));  // not a uniform resize
+  CHECK(error_of([&] { (void)load_scene(root, opt, "small"); }).find("aspect ratio") != std::string::npos);
+  CHECK(error_of([&] { (void)load_scene(root, opt, "images_8"); }).find("images_8") != std::string::npos);
+  CHECK(error_of([&] { (void)load_scene(root, opt, "nowhere"); }).find("nowhere") != std::string::npos);
+
+  // A text model directly in sparse/.
+  const auto flat = scratch("scene_flat");
+  fs::create_directories(flat / "sparse");
+  write_text_model(flat / "sparse");
+  CHECK(detect_scene(flat).describe(flat) == "COLMAP scene (sparse, text)");
+
+  // Neither layout: one message naming both and the import command.
+  const auto empty = scratch("scene_none");
+  const std::string msg = error_of([&] { (void)detect_scene(empty); });
+  CHECK(msg.find("transforms.json") != std::string::npos);
+  CHECK(msg.find("sparse/0") != std::string::npos);
+  CHECK(msg.find("msgs import") != std::string::npos);
+  CHECK(error_of([&] { (void)detect_scene(empty / "missing"); }).find("does not exist") != std::string::npos);
+  CHECK(downscale_folder_factor("images_4") == 4);
+  CHECK(!downscale_folder_factor("images_").has_value());
+  CHECK(!downscale_folder_factor("images_x").has_value());
+  CHECK(!downscale_folder_factor("images_0").has_value());
 }

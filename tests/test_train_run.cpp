@@ -206,3 +206,68 @@ TEST_CASE("Joint: one 7-channel model over every band") {
   for (const auto& m : res.metrics) seen.insert(m.band);
   CHECK(seen.size() == 5);
 }
+
+TEST_CASE("Geometry band: strategies that need one refuse a capture without it before training") {
+  // A capture without the RGB camera: only narrow bands.
+  for (const char* s : {"split", "joint+specdelay+msad", "joint+sig", "split+extadc"}) {
+    RunConfig cfg = config(s, 0.002);
+    cfg.bands = {"MS_G", "MS_NIR"};
+    std::string msg;
+    try {
+      validate_run(tiny(), cfg);
+    } catch (const std::invalid_argument& e) {
+      msg = e.what();
+    }
+    INFO(s, ": ", msg);
+    CHECK(msg.find("geometry band") != std::string::npos);
+    CHECK(msg.find("RGB band D") != std::string::npos);
+    CHECK(msg.find("--geometry-band") != std::string::npos);
+    CHECK(msg.find("MS_G, MS_NIR") != std::string::npos);
+    CHECK_THROWS_AS(run_experiment<kDeg>(tiny(), cfg), std::invalid_argument);  // run_experiment checks too
+    cfg.geometry_band = "MS_RE";  // a band that is not trained is no better
+    CHECK_THROWS_WITH_AS(validate_run(tiny(), cfg), doctest::Contains("band 'MS_RE'"), std::invalid_argument);
+    cfg.geometry_band = "MS_NIR";
+    CHECK_NOTHROW(validate_run(tiny(), cfg));
+  }
+  for (const char* s : {"separate", "joint", "joint+msad", "joint+extadc"}) {
+    RunConfig cfg = config(s, 0.002);
+    cfg.bands = {"MS_G", "MS_NIR"};
+    CHECK_NOTHROW(validate_run(tiny(), cfg));
+  }
+}
+
+TEST_CASE("Geometry band: Split from a narrow band, SpecDelay trains the geometry band alone first") {
+  {
+    const fs::path out = out_dir("split_nir");
+    RunConfig cfg = config("split", 0.002);  // 60 + 60 steps
+    cfg.bands = {"MS_G", "MS_NIR"};
+    cfg.geometry_band = "MS_NIR";
+    std::vector<std::pair<long long, long long>> ranges;
+    cfg.train.progress_every = 1000;
+    cfg.train.on_progress = [&](const TrainProgress& pr) { ranges.emplace_back(pr.begin, pr.end); };
+    const RunResult res = run_experiment<kDeg>(tiny(), cfg, out);
+    CHECK(ranges == std::vector<std::pair<long long, long long>>{{0, 60}, {60, 120}});
+    REQUIRE(res.models.count("MS_NIR") == 1);
+    REQUIRE(res.models.count("MS_G") == 1);
+    CHECK(io::inspect_ply(res.models.at("MS_NIR")).channels == 1);
+    CHECK(io::inspect_ply(res.models.at("MS_G")).channels == 1);
+  }
+  {
+    RunConfig cfg = config("joint+specdelay", 0.002);  // spectral bands from step 60 of 240
+    cfg.bands = {"D", "MS_G", "MS_NIR"};
+    cfg.geometry_band = "MS_NIR";  // D is then one of the bands that wait
+    const long long start = parse_strategy(cfg.strategy, ScheduleScale{cfg.scale}).plan.spectral_start;
+    REQUIRE(start > 10);
+    std::vector<double> before;  // running training PSNR per band just before the delay ends
+    cfg.train.progress_every = 1;
+    cfg.train.on_progress = [&](const TrainProgress& pr) {
+      if (pr.step == start) before = pr.band_psnr;  // steps 0 .. start-1 done
+      if (pr.step == start + 20) throw std::runtime_error("enough");
+    };
+    CHECK_THROWS_WITH(run_experiment<kDeg>(tiny(), cfg), "enough");
+    REQUIRE(before.size() == 3);  // D, MS_G, MS_NIR: only the geometry band was sampled
+    CHECK(std::isnan(before[0]));
+    CHECK(std::isnan(before[1]));
+    CHECK(std::isfinite(before[2]));
+  }
+}

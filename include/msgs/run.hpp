@@ -31,6 +31,11 @@ struct RunConfig {
   /// gsplat's / 3DGS's. MSAD and ExtADC then change it as in the paper.
   DensifyPreset densify = DensifyPreset::MultiSpectral;
   std::vector<std::string> bands;     ///< bands to train (empty: every band of the dataset)
+  /// The band whose steps shape the geometry where a strategy distinguishes one: SpecDelay trains it
+  /// alone first, SIG lets only it move geometry, Split copies its model's geometry into the other
+  /// bands' models. The RGB camera "D" by default; captures without one name another band (e.g. a
+  /// MicaSense rig: "MS_NIR"). Strategies that treat every band alike ignore it.
+  std::string geometry_band = "D";
   /// Most Gaussians densification may grow each model to (DensifyConfig::max_gaussians; 0 = no limit).
   std::size_t max_gaussians = 0;
   TrainOptions train{};               ///< seed, learning rates, callbacks
@@ -58,8 +63,10 @@ struct RunResult {
 
 namespace detail {
 
-/// The bands of a dataset a run trains, in the standard order, with their Joint channel layout.
-inline std::vector<TrainBand> run_bands(const io::Dataset& ds, const std::vector<std::string>& wanted) {
+/// The bands of a dataset a run trains, in the standard order, with their Joint channel layout;
+/// every band but `geometry_band` counts as spectral.
+inline std::vector<TrainBand> run_bands(const io::Dataset& ds, const std::vector<std::string>& wanted,
+                                        const std::string& geometry_band = "D") {
   std::vector<TrainBand> out;
   for (const std::string& id : ds.bands()) {
     if (!wanted.empty() && std::find(wanted.begin(), wanted.end(), id) == wanted.end()) continue;
@@ -68,7 +75,7 @@ inline std::vector<TrainBand> run_bands(const io::Dataset& ds, const std::vector
     b.id = id;
     b.first_channel = info->first_channel_in_joint;
     b.channels = info->channels;
-    b.spectral = id != "D";
+    b.spectral = id != geometry_band;
     for (std::size_t i : ds.frames_of(id, io::Split::train)) b.train_frames.push_back(i);
     for (std::size_t i : ds.frames_of(id, io::Split::eval)) b.eval_frames.push_back(i);
     if (b.train_frames.empty()) throw std::invalid_argument("dataset " + ds.root.string() + ": band " + id + " has no training images");
@@ -80,6 +87,42 @@ inline std::vector<TrainBand> run_bands(const io::Dataset& ds, const std::vector
   if (out.empty()) throw std::invalid_argument("dataset " + ds.root.string() + " has no bands to train");
   return out;
 }
+
+/// Why a strategy needs a geometry band ("" when it does not).
+inline std::string geometry_band_role(const TrainPlan& p) {
+  if (p.kind == StrategyKind::Split) return "Split trains it first and copies its geometry into every other band's model";
+  if (p.sig) return "SIG lets only its steps move geometry";
+  if (p.spectral_start > 0) return "SpecDelay trains it alone first";
+  return "";
+}
+
+}  // namespace detail
+
+/// Check before training that `cfg` can run on `ds`: the strategy and the schedule scale resolve,
+/// the requested bands exist and have training images, and a strategy that needs a geometry band
+/// (Split, SpecDelay, SIG) finds `cfg.geometry_band` among the bands it trains. Throws
+/// std::invalid_argument naming what is missing and the ways out. run_experiment calls it too.
+inline void validate_run(const io::Dataset& ds, const RunConfig& cfg) {
+  ScheduleScale scale{cfg.scale};
+  scale.validate();
+  const StrategySpec spec = parse_strategy(cfg.strategy, scale, cfg.densify);
+  const std::vector<TrainBand> bands = detail::run_bands(ds, cfg.bands, cfg.geometry_band);
+  const std::string role = detail::geometry_band_role(spec.plan);
+  if (role.empty()) return;
+  std::string have;
+  for (const auto& b : bands) have += (have.empty() ? "" : ", ") + b.id;
+  if (std::none_of(bands.begin(), bands.end(), [&](const TrainBand& b) { return b.id == cfg.geometry_band; })) {
+    const bool rgb = cfg.geometry_band == "D";
+    throw std::invalid_argument(
+        "strategy " + spec.plan.name + " needs a geometry band (" + role + "), and " +
+        (rgb ? std::string("the default one, the RGB band D, ") : "band '" + cfg.geometry_band + "' ") +
+        "is not among the bands to train (" + have + "). Ways out: --geometry-band ID with one of " + have +
+        " (the band with the most texture, often MS_NIR or MS_G), or a strategy that needs none: separate, joint, "
+        "joint+msad, joint+extadc");
+  }
+}
+
+namespace detail {
 
 /// Initial model from the dataset's sparse point cloud (or random points around the cameras).
 template <class G>
@@ -161,12 +204,13 @@ RunResult run_experiment(const io::Dataset& ds, const RunConfig& cfg, const std:
   const auto t0 = clock::now();
   ScheduleScale scale{cfg.scale};
   scale.validate();
+  validate_run(ds, cfg);
   StrategySpec spec = parse_strategy(cfg.strategy, scale, cfg.densify);
   spec.plan.densify.max_gaussians = cfg.max_gaussians;
   RunResult res;
   res.strategy = spec.plan.name;
   res.plan = spec.plan;
-  std::vector<TrainBand> bands = detail::run_bands(ds, cfg.bands);
+  std::vector<TrainBand> bands = detail::run_bands(ds, cfg.bands, cfg.geometry_band);
   const long long stage = spec.plan.stage_steps;
 
   switch (spec.plan.kind) {
@@ -193,26 +237,37 @@ RunResult run_experiment(const io::Dataset& ds, const RunConfig& cfg, const std:
       break;
     }
     case StrategyKind::Split: {
-      auto rgb_it = std::find_if(bands.begin(), bands.end(), [](const TrainBand& b) { return b.id == "D"; });
-      if (rgb_it == bands.end()) throw std::invalid_argument("strategy split needs the RGB band D in the dataset");
-      TrainBand rgb = *rgb_it;
-      rgb.first_channel = 0;
+      // The geometry band's model first (the RGB band D unless cfg.geometry_band names another),
+      // then one model per other band from its geometry with fresh colour.
+      TrainBand geo = *std::find_if(bands.begin(), bands.end(),
+                                    [&](const TrainBand& b) { return b.id == cfg.geometry_band; });
+      geo.first_channel = 0;
       using G3 = Gaussian<3, SHDeg>;
       using G1 = Gaussian<1, SHDeg>;
-      const GaussianModel<G3, float> rgb_model = detail::train_model<G3>(
-          ds, {rgb}, detail::initial_model<G3>(ds, cfg), spec, cfg, 0, stage, "D", out_dir, detail::channel_names(rgb), res, 0);
-      for (std::size_t i = 0; i < bands.size(); ++i) {
-        TrainBand b = bands[i];
-        if (b.id == "D" || res.interrupted) continue;
-        b.first_channel = 0;
-        GaussianModel<G1, float> m;
-        detail::copy_geometry(rgb_model, m);
-        detail::fresh_colour(m, cfg.init.seed + 1u + std::uint32_t(i));
-        // The band model's step counter continues from the RGB stage (REFERENCE §4: "30k + 30k"),
-        // so the position learning rate keeps decaying and ExtADC's 45k refers to this counter.
-        detail::train_model<G1>(ds, {b}, std::move(m), spec, cfg, stage, 2 * stage, b.id, out_dir, detail::channel_names(b),
-                                res, stage);
-      }
+      auto band_models_from = [&](const auto& geo_model) {
+        for (std::size_t i = 0; i < bands.size(); ++i) {
+          TrainBand b = bands[i];
+          if (b.id == geo.id || res.interrupted) continue;
+          b.first_channel = 0;
+          // The band model's step counter continues from the geometry stage (REFERENCE §4: "30k +
+          // 30k"), so the position learning rate keeps decaying and ExtADC's 45k refers to it.
+          auto train_from_geometry = [&](auto model) {
+            using G = typename decltype(model)::gaussian_type;
+            detail::copy_geometry(geo_model, model);
+            detail::fresh_colour(model, cfg.init.seed + 1u + std::uint32_t(i));
+            detail::train_model<G>(ds, {b}, std::move(model), spec, cfg, stage, 2 * stage, b.id, out_dir,
+                                   detail::channel_names(b), res, stage);
+          };
+          if (b.channels == 3) train_from_geometry(GaussianModel<G3, float>{});
+          else train_from_geometry(GaussianModel<G1, float>{});
+        }
+      };
+      if (geo.channels == 3)
+        band_models_from(detail::train_model<G3>(ds, {geo}, detail::initial_model<G3>(ds, cfg), spec, cfg, 0, stage,
+                                                 geo.id, out_dir, detail::channel_names(geo), res, 0));
+      else
+        band_models_from(detail::train_model<G1>(ds, {geo}, detail::initial_model<G1>(ds, cfg), spec, cfg, 0, stage,
+                                                 geo.id, out_dir, detail::channel_names(geo), res, 0));
       break;
     }
   }

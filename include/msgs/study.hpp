@@ -699,22 +699,25 @@ inline std::string shell_quote(const std::string& w) {
 }  // namespace detail
 
 /// The `msgs train` arguments of a run (without the program): --data, --out <out_root>/runs/<id>,
-/// --strategy, --scale, --sh-degree, --seed, --bands (when not all), --quiet.
+/// --strategy, --scale, --sh-degree, --seed, --bands (when not all), then `data_args` (the study's
+/// --images, --eval-every, --geometry-band as given), --quiet.
 inline std::vector<std::string> train_arguments(const StudyRun& r, const std::filesystem::path& data,
-                                                const std::filesystem::path& out_root) {
+                                                const std::filesystem::path& out_root,
+                                                const std::vector<std::string>& data_args = {}) {
   std::vector<std::string> a = {"train", "--data", data.string(), "--out", (out_root / "runs" / r.id).string(),
                                 "--strategy", r.strategy, "--scale", detail::format_number(r.scale, "%.17g"),
                                 "--sh-degree", std::to_string(r.sh_degree), "--seed", std::to_string(r.seed)};
   if (!r.bands.empty()) { a.push_back("--bands"); a.push_back(detail::join(r.bands, ",")); }
+  a.insert(a.end(), data_args.begin(), data_args.end());
   a.push_back("--quiet");
   return a;
 }
 
 /// One shell command line per run: `<msgs> train --data ... --out <out_root>/runs/<id> ...`.
 inline std::string job_line(const StudyRun& r, const std::filesystem::path& msgs_exe, const std::filesystem::path& data,
-                            const std::filesystem::path& out_root) {
+                            const std::filesystem::path& out_root, const std::vector<std::string>& data_args = {}) {
   std::string line = detail::shell_quote(msgs_exe.string());
-  for (const auto& w : train_arguments(r, data, out_root)) {
+  for (const auto& w : train_arguments(r, data, out_root, data_args)) {
     line += ' ';
     line += detail::shell_quote(w);
   }
@@ -763,6 +766,7 @@ inline std::vector<std::string> split_shell_words(std::string_view s) {
 struct ParsedJob {
   StudyRun run;  ///< id = the last component of --out
   std::filesystem::path data, out;
+  std::vector<std::string> data_args;  ///< --images, --eval-every, --geometry-band with their values
 };
 
 /// Parse a line written by job_line. Throws std::invalid_argument naming the line and the problem.
@@ -784,6 +788,7 @@ inline ParsedJob parse_job_line(std::string_view line) {
       else if (k == "--scale") j.run.scale = std::stod(v);
       else if (k == "--sh-degree") j.run.sh_degree = std::stoi(v);
       else if (k == "--seed") j.run.seed = std::stoull(v);
+      else if (k == "--images" || k == "--eval-every" || k == "--geometry-band") { j.data_args.push_back(k); j.data_args.push_back(v); }
       else if (k == "--bands") {
         j.run.bands.clear();
         std::string cur;

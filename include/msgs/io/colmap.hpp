@@ -15,6 +15,7 @@
 #include <map>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "msgs/camera.hpp"
@@ -350,12 +351,19 @@ inline ColmapModel read_colmap(const std::filesystem::path& dir) {
 /// `opt.eval_every`-th image by name (3DGS uses 8 for its benchmarks); poses and points are
 /// re-oriented like load_dataset when `opt.orient_and_center`. Images are read lazily by
 /// load_frame_image as for the multi-spectral layout.
+///
+/// An `image_dir` other than "images" may hold resized copies (3DGS's images_4): the first image of
+/// each COLMAP camera is read and the camera's intrinsics are scaled to its size; every other image
+/// of that camera must then have the same size (checked when it is loaded).
 inline Dataset load_colmap_dataset(const std::filesystem::path& root, const LoadOptions& opt = {},
                                    const std::string& image_dir = "images") {
   namespace fs = std::filesystem;
   std::error_code ec;
+  auto has_model = [&](const fs::path& d) {
+    return fs::is_regular_file(d / "cameras.bin", ec) || fs::is_regular_file(d / "cameras.txt", ec);
+  };
   fs::path sparse = root / "sparse" / "0";
-  if (!fs::is_directory(sparse, ec)) sparse = root / "sparse";
+  if (!has_model(sparse)) sparse = root / "sparse";
   if (!fs::is_directory(sparse, ec)) fail(root / "sparse", "COLMAP model folder does not exist (need sparse/0 or sparse)");
   const ColmapModel m = read_colmap(sparse);
   if (m.images.empty()) fail(sparse, "model has no registered images");
@@ -376,6 +384,29 @@ inline Dataset load_colmap_dataset(const std::filesystem::path& root, const Load
       fail(sparse, cat("image ", im.id), cat("image '", (root / f.file_path).string(), "' does not exist"));
     c2w.push_back(im.camera.opengl_c2w().cast<double>());
     ds.frames.push_back(std::move(f));
+  }
+  if (fs::path(image_dir).lexically_normal() != fs::path("images")) {
+    std::map<int, std::pair<double, double>> scale_of;  // camera id -> (sx, sy)
+    for (std::size_t i = 0; i < ds.frames.size(); ++i) {
+      Frame& f = ds.frames[i];
+      const int cam = m.images[i].camera_id;
+      auto it = scale_of.find(cam);
+      if (it == scale_of.end()) {
+        const Image<float> first = read_image(root / f.file_path);
+        const double sx = double(first.width) / f.raw_camera.width, sy = double(first.height) / f.raw_camera.height;
+        if (std::abs(sx - sy) > 0.02 * std::max(sx, sy))
+          fail(root / f.file_path, cat("image is ", first.width, "x", first.height, " but COLMAP camera ", cam, " is ",
+                                       f.raw_camera.width, "x", f.raw_camera.height,
+                                       ": not a uniformly resized copy (aspect ratio differs)"));
+        it = scale_of.emplace(cam, std::make_pair(sx, sy)).first;
+      }
+      const auto [sx, sy] = it->second;
+      Camera<float>& c = f.raw_camera;
+      const int w = int(std::lround(c.width * sx)), h = int(std::lround(c.height * sy));
+      c.fx = float(c.fx * (double(w) / c.width)); c.cx = float(c.cx * (double(w) / c.width));
+      c.fy = float(c.fy * (double(h) / c.height)); c.cy = float(c.cy * (double(h) / c.height));
+      c.width = w; c.height = h;
+    }
   }
   const Eigen::Matrix4d T = opt.orient_and_center ? detail::orient_and_center_transform(c2w) : Eigen::Matrix4d::Identity();
   ds.transform = T.cast<float>();

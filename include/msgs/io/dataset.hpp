@@ -65,6 +65,8 @@ struct LoadOptions {
   /// Without train_split.json: every `eval_every`-th frame of each band (0-based index % n == 0)
   /// goes to eval; 0 puts everything in train.
   int eval_every = 10;
+  /// Use train_split.json when the dataset has one; false splits by `eval_every` instead.
+  bool use_split_file = true;
 };
 
 /// A loaded dataset (metadata only; images come from load_frame_image).
@@ -362,7 +364,7 @@ inline Dataset load_dataset(const std::filesystem::path& root, const LoadOptions
   // Split: the file when present, else every eval_every-th frame per band.
   const fs::path split_path = root / "train_split.json";
   std::error_code ec;
-  if (fs::exists(split_path, ec)) {
+  if (opt.use_split_file && fs::exists(split_path, ec)) {
     ds.has_split_file = true;
     if (opt.bands.empty()) {
       detail::apply_split(ds, split_path);
@@ -416,7 +418,7 @@ inline Camera<float> frame_camera(const Dataset& ds, const Frame& f, int factor 
 }
 
 /// Read the image of `f` at resolution divisor `factor_arg` (0: the dataset's default), as floats
-/// in [0, 1] with the band's channel count, undistorted into frame_camera(ds, f, factor_arg).
+/// in [0, 1] with the band's channel count (a grey image of an RGB band is repeated in R, G, B), undistorted into frame_camera(ds, f, factor_arg).
 /// A downscaled copy in images_<f>/ is used when present and of the expected size
 /// (ceil(w / f) x ceil(h / f)); a copy one pixel off (rounded down) is ignored and the full image
 /// is box-filtered in memory instead, so image and camera always agree. Throws IoError naming the
@@ -456,12 +458,14 @@ inline Image<float> load_frame_image(const Dataset& ds, const Frame& f, int fact
   // Channel count of the band: RGBA loses alpha; a grey band stored as RGB(A) takes the mean of R, G, B.
   const int want = standard_bands()[static_cast<std::size_t>(f.band_index)].channels;
   if (img.channels != want) {
-    if (img.channels < want)
+    if (img.channels < want && img.channels != 1)
       fail(full, cat("band ", f.band, " needs ", want, " channels but the image has ", img.channels));
     Image<float> o(img.width, img.height, want);
     for (std::size_t p = 0; p < img.pixels(); ++p) {
       const float* src = img.data.data() + p * std::size_t(img.channels);
       if (want == 1 && img.channels >= 3) o.data[p] = (src[0] + src[1] + src[2]) / 3.0f;
+      else if (img.channels == 1)  // a grey photo of an RGB band: the same value in every channel
+        for (int c = 0; c < want; ++c) o.data[p * std::size_t(want) + std::size_t(c)] = src[0];
       else
         for (int c = 0; c < want; ++c) o.data[p * std::size_t(want) + std::size_t(c)] = src[c];
     }
