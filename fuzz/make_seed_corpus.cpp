@@ -3,6 +3,7 @@
 // the seeds are valid files a fuzzer mutates from. Run once after a format change: make_seed_corpus <dir>.
 #include <stb/stb_image_write.h>
 
+#include <cstdint>
 #include <cstdio>
 #include <filesystem>
 #include <string>
@@ -63,7 +64,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   const fs::path out = argv[1];
-  for (const char* t : {"ply", "image", "dataset"}) fs::create_directories(out / t);
+  for (const char* t : {"ply", "image", "dataset", "colmap"}) fs::create_directories(out / t);
 
   // PLY: models of two SH degrees, point clouds binary / ASCII (with a face list) / big-endian.
   io::write_ply<Gaussian<3, 1>>(out / "ply" / "model_c3_deg1.ply", tiny_model<Gaussian<3, 1>>(2), {"D_R", "D_G", "D_B"});
@@ -116,5 +117,43 @@ int main(int argc, char** argv) {
   val_split.push_back('\0');
   val_split += R"({"train": ["images/D_00001.png"], "val": ["./images/D_00002.png"], "test": []})";
   text(out / "dataset" / "split_val.json", val_split);
+
+  // COLMAP models: 't' + cameras.txt, images.txt, points3D.txt; 'b' + the same in binary.
+  const std::string sep = "\n#@@next-file@@#\n";
+  text(out / "colmap" / "text.model",
+       "t# Camera list\n1 PINHOLE 40 30 35 36 20 15\n2 SIMPLE_RADIAL 40 30 33 19.5 15.5 -0.05\n"
+       "3 OPENCV 40 30 30 31 20 15 -0.1 0.01 0.001 -0.002\n4 OPENCV_FISHEYE 40 30 30 31 20 15 0.01 0 0 0\n"
+       "5 FULL_OPENCV 40 30 30 31 20 15 -0.1 0.01 0.001 -0.002 0.001 0 0 0\n6 RADIAL 40 30 30 20 15 0.01 0.001\n" +
+       sep + "# Image list\n7 0.7071 0 0 0.7071 0.5 -1 2 1 b.png\n1.0 2.0 5 10.5 3.5 -1\n3 1 0 0 0 0 0 4 2 a.png\n\n"
+       "9 0.9 0.1 -0.3 0.2 1 2 3 3 c d.png\n\n" +
+       sep + "# 3D point list\n5 -1 2 -3 1 2 3 0.5 7 0\n6 0.1 0.2 0.3 255 0 10 1.25\n");
+  {
+    std::string b = "b";
+    auto put = [&](const auto& v) { b.append(reinterpret_cast<const char*>(&v), sizeof v); };
+    put(std::uint64_t(2));
+    put(std::int32_t(1)); put(std::int32_t(1)); put(std::uint64_t(40)); put(std::uint64_t(30));
+    for (double v : {35.0, 36.0, 20.0, 15.0}) put(v);
+    put(std::int32_t(2)); put(std::int32_t(4)); put(std::uint64_t(40)); put(std::uint64_t(30));
+    for (double v : {30.0, 31.0, 20.0, 15.0, -0.1, 0.01, 0.001, -0.002}) put(v);
+    b += sep;
+    put(std::uint64_t(2));
+    for (int i = 0; i < 2; ++i) {
+      put(std::int32_t(3 + i));
+      for (double v : {1.0, 0.0, 0.0, 0.0, 0.5 * i, 0.0, 4.0}) put(v);
+      put(std::int32_t(1 + i));
+      b += i ? "b.png" : "a.png";
+      b.push_back('\0');
+      put(std::uint64_t(1));
+      put(2.5); put(3.5); put(std::int64_t(5));
+    }
+    b += sep;
+    put(std::uint64_t(1));
+    put(std::uint64_t(5));
+    for (double v : {-1.0, 2.0, -3.0}) put(v);
+    for (std::uint8_t c : {1, 2, 3}) put(c);
+    put(0.5);
+    put(std::uint64_t(1)); put(std::int32_t(3)); put(std::int32_t(0));
+    text(out / "colmap" / "binary.model", b);
+  }
   return 0;
 }
