@@ -56,6 +56,31 @@ TEST_CASE("fisheye model matches theta polynomial") {
   CHECK(yd == doctest::Approx(y * thd / r).epsilon(1e-14));
 }
 
+TEST_CASE("rational model (COLMAP FULL_OPENCV) matches OpenCV's rational formula and inverts") {
+  Distortion d;
+  d.model = Distortion::Model::rational;
+  d.k1 = -0.1; d.k2 = 0.02; d.k3 = -0.003; d.k4 = 0.05; d.k5 = -0.01; d.k6 = 0.002; d.p1 = 0.001; d.p2 = -0.0015;
+  const double x = 0.3, y = -0.2, r2 = 0.13;
+  const double radial = (1 - 0.1 * r2 + 0.02 * r2 * r2 - 0.003 * r2 * r2 * r2) / (1 + 0.05 * r2 - 0.01 * r2 * r2 + 0.002 * r2 * r2 * r2);
+  double xd, yd;
+  d.distort(x, y, xd, yd);
+  CHECK(xd == doctest::Approx(x * radial + 2 * 0.001 * x * y - 0.0015 * (r2 + 2 * x * x)).epsilon(1e-14));
+  CHECK(yd == doctest::Approx(y * radial + 0.001 * (r2 + 2 * y * y) + 2 * (-0.0015) * x * y).epsilon(1e-14));
+  for (double px : {-0.5, 0.0, 0.4})
+    for (double py : {-0.3, 0.2}) {
+      double u, v, xu, yu;
+      d.distort(px, py, u, v);
+      REQUIRE(d.undistort(u, v, xu, yu));
+      CHECK(xu == doctest::Approx(px).epsilon(1e-9));
+      CHECK(yu == doctest::Approx(py).epsilon(1e-9));
+    }
+  CHECK_FALSE(d.is_identity());
+  d.k1 = d.k2 = d.k3 = d.k4 = d.p1 = d.p2 = 0;
+  CHECK_FALSE(d.is_identity());  // the denominator alone still distorts
+  d.k5 = d.k6 = 0;
+  CHECK(d.is_identity());
+}
+
 TEST_CASE("undistort inverts distort") {
   const auto d = opencv(-0.2, 0.05, 0.0, 0.0, 0.001, 0.002);
   for (double x : {-0.5, -0.1, 0.0, 0.25, 0.6})

@@ -97,11 +97,10 @@ inline void colmap_intrinsics(const ColmapCamera& c, const std::filesystem::path
       dist.model = Distortion::Model::fisheye;
       dist.k1 = q[4]; dist.k2 = q[5]; dist.k3 = q[6]; dist.k4 = q[7];
     } else if (c.model == "FULL_OPENCV") {
-      // k1 k2 p1 p2 k3 k4 k5 k6: the rational denominator (k4..k6) has no counterpart here.
-      if (q[9] != 0 || q[10] != 0 || q[11] != 0)
-        fail(p, field, "FULL_OPENCV with non-zero k4, k5 or k6 (rational model) is not supported");
-      dist.model = Distortion::Model::opencv;
+      // k1 k2 p1 p2 k3 k4 k5 k6: OpenCV's rational model (k4..k6 in the denominator).
+      dist.model = (q[9] != 0 || q[10] != 0 || q[11] != 0) ? Distortion::Model::rational : Distortion::Model::opencv;
       dist.k1 = q[4]; dist.k2 = q[5]; dist.p1 = q[6]; dist.p2 = q[7]; dist.k3 = q[8];
+      if (dist.model == Distortion::Model::rational) { dist.k4 = q[9]; dist.k5 = q[10]; dist.k6 = q[11]; }
     }
   } else {
     fail(p, field, cat("unsupported camera model ", c.model,

@@ -18,22 +18,27 @@ namespace msgs::io {
 ///  - `opencv`: r2 = x² + y², d = 1 + k1 r2 + k2 r2² + k3 r2³ + k4 r2⁴,
 ///    x' = x d + 2 p1 x y + p2 (r2 + 2x²), y' = y d + p1 (r2 + 2y²) + 2 p2 x y
 ///    (OpenCV's model; nerfstudio stores k4 as the r⁸ term of the same polynomial).
+///  - `rational`: COLMAP's FULL_OPENCV, OpenCV's rational model: d = (1 + k1 r2 + k2 r2² + k3 r2³) /
+///    (1 + k4 r2 + k5 r2² + k6 r2³), tangential terms as `opencv`.
 ///  - `fisheye`: θ = atan(r), θd = θ (1 + k1 θ² + k2 θ⁴ + k3 θ⁶ + k4 θ⁸), (x', y') = (θd / r) (x, y).
 struct Distortion {
-  enum class Model { none, opencv, fisheye };
+  enum class Model { none, opencv, fisheye, rational };
   Model model = Model::none;
   double k1 = 0, k2 = 0, k3 = 0, k4 = 0, p1 = 0, p2 = 0;
+  double k5 = 0, k6 = 0;  ///< `rational` only: the r2² and r2³ terms of the denominator
 
   /// True when applying the model changes nothing.
   bool is_identity() const {
-    return model == Model::none || (k1 == 0 && k2 == 0 && k3 == 0 && k4 == 0 && (model == Model::fisheye || (p1 == 0 && p2 == 0)));
+    return model == Model::none || (k1 == 0 && k2 == 0 && k3 == 0 && k4 == 0 && k5 == 0 && k6 == 0 &&
+                                    (model == Model::fisheye || (p1 == 0 && p2 == 0)));
   }
 
   /// Map an undistorted normalised point to where the lens puts it.
   void distort(double x, double y, double& xd, double& yd) const {
-    if (model == Model::opencv) {
+    if (model == Model::opencv || model == Model::rational) {
       const double r2 = x * x + y * y;
-      const double d = 1 + r2 * (k1 + r2 * (k2 + r2 * (k3 + r2 * k4)));
+      const double d = model == Model::opencv ? 1 + r2 * (k1 + r2 * (k2 + r2 * (k3 + r2 * k4)))
+                                              : (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)));
       xd = x * d + 2 * p1 * x * y + p2 * (r2 + 2 * x * x);
       yd = y * d + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y;
     } else if (model == Model::fisheye) {
