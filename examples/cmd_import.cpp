@@ -146,8 +146,13 @@ double run_colmap(const std::string& colmap, const std::string& stage, std::vect
   const double s = since(t);
   if (rc != 0) {
     std::printf(" failed (exit %d) after %.1f s\n", rc, s);
-    fail(log, cat("colmap ", stage, " failed with exit status ", rc, "; last lines of its log:\n",
-                  msgs::cli::tail_lines(log, 25)));
+    std::fflush(stdout);
+    const std::string hint =
+        stage == "mapper" ? "\n  (no initial pair or too few matches: images too small (COLMAP needed >= 160 px wide "
+                            "for the synthetic captures), too little texture or overlap, or too few captures?)"
+                          : "";
+    throw msgs::io::IoError(cat("colmap ", stage, " failed with exit status ", rc, "; last lines of its log",
+                                " (--keep-work keeps the whole log):\n", msgs::cli::tail_lines(log, 25), hint));
   }
   std::printf(" %6.1f s\n", s);
   std::fflush(stdout);
@@ -319,7 +324,8 @@ int run_import(const std::vector<std::string>& argv) {
         // exiv2 exits non-zero when a file has none of the keys; only a missing output is an error.
         const std::string text = fs::exists(txt, ec) ? msgs::io::read_text(txt) : std::string();
         if (rc != 0 && text.empty() && rc != 1 && rc != 253)
-          fail(work / "exiv2.log", cat("exiv2 failed with exit status ", rc, ":\n", msgs::cli::tail_lines(work / "exiv2.log", 10)));
+          throw msgs::io::IoError(cat(exiv2_arg, " failed with exit status ", rc, " (--radiometry none skips it):\n",
+                                      msgs::cli::tail_lines(work / "exiv2.log", 10)));
         const auto per_file = msgs::io::split_exiv2_output(text, names);
         for (std::size_t i = i0; i < i1; ++i) items[i].meta = msgs::io::parse_capture_meta(per_file[i - i0], images / items[i].source);
       }
@@ -342,11 +348,15 @@ int run_import(const std::vector<std::string>& argv) {
       }
       const auto plan = msgs::io::plan_band(metas, srcs);
       steps = plan.steps;
-      for (const auto& [tag, lacking] : plan.missing) {
-        std::vector<std::string> names;
-        for (const auto& f : lacking) names.push_back(f.generic_string());
-        std::printf("  warning: %s: no %s for %zu of %zu files (%s); that correction is left out for the band\n",
-                    band.c_str(), tag.c_str(), lacking.size(), idx.size(), list_some(names, 3).c_str());
+      if (!plan.missing.empty()) {
+        std::string what;
+        for (const auto& [tag, lacking] : plan.missing) {
+          std::vector<std::string> names;
+          for (const auto& f : lacking) names.push_back(f.generic_string());
+          what += cat("\n    ", tag, " missing in ", lacking.size(), " of ", idx.size(), " files: ", list_some(names, 3));
+        }
+        std::printf("  warning: %s: corrections left out for the whole band (%s):%s\n", band.c_str(),
+                    steps.any() ? "the others are applied" : "stored values kept", what.c_str());
       }
     }
     double mx = 0.0;
@@ -445,8 +455,8 @@ int run_import(const std::vector<std::string>& argv) {
     }
   }
   if (best_dir.empty())
-    fail(log, cat("COLMAP's mapper reconstructed nothing (no model in ", (work / "sparse").string(),
-                  "): too few matches between the images? last lines of its log:\n", msgs::cli::tail_lines(log, 15)));
+    throw msgs::io::IoError(cat("COLMAP's mapper reconstructed nothing (too few matches between the images?); ",
+                                "last lines of its log:\n", msgs::cli::tail_lines(log, 15)));
   std::map<std::string, const msgs::io::ColmapImage*> registered;
   for (const auto& im : best.images) registered[im.name] = &im;
   std::vector<std::string> missing;
