@@ -175,6 +175,14 @@ msgs::Image<float> sift_copy(const msgs::Image<float>& img) {
   return out;
 }
 
+/// Float to the shortest double that reads back as the same float (135.365265, not 135.36526489257813).
+double tidy(float v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.9g", double(v));
+  const double d = std::strtod(buf, nullptr);
+  return d == 0.0 ? 0.0 : d;  // no "-0.0"
+}
+
 nlohmann::ordered_json opt_number(const std::optional<double>& v) {
   return v ? nlohmann::ordered_json(*v) : nlohmann::ordered_json(nullptr);
 }
@@ -512,10 +520,10 @@ int run_import(const std::vector<std::string>& argv) {
     nlohmann::ordered_json f;
     f["file_path"] = "images/" + it.out_name;
     f["mm_channel"] = it.band;
-    f["fl_x"] = im.camera.fx;
-    f["fl_y"] = im.camera.fy;
-    f["cx"] = im.camera.cx;
-    f["cy"] = im.camera.cy;
+    f["fl_x"] = tidy(im.camera.fx);
+    f["fl_y"] = tidy(im.camera.fy);
+    f["cx"] = tidy(im.camera.cx);
+    f["cy"] = tidy(im.camera.cy);
     f["w"] = im.camera.width;
     f["h"] = im.camera.height;
     using M = msgs::io::Distortion::Model;
@@ -530,7 +538,7 @@ int run_import(const std::vector<std::string>& argv) {
     nlohmann::ordered_json rows = nlohmann::ordered_json::array();
     for (int r = 0; r < 4; ++r) {
       nlohmann::ordered_json row = nlohmann::ordered_json::array();
-      for (int c = 0; c < 4; ++c) row.push_back(c2w(r, c));
+      for (int c = 0; c < 4; ++c) row.push_back(tidy(c2w(r, c)));
       rows.push_back(row);
     }
     f["transform_matrix"] = rows;
