@@ -1,10 +1,13 @@
 // examples/cmd_synth.cpp
 // `msgs synth`: generate a ray-traced synthetic multi-spectral dataset in the public layout.
+#include <algorithm>
 #include <cstdio>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
 #include <msgs/synth.hpp>
+#include <msgs/synth/raw.hpp>
 
 #include "commands.hpp"
 
@@ -12,6 +15,8 @@ namespace {
 
 constexpr const char* kUsage =
     "usage: msgs synth --preset tiny|small|medium --out DIR [--seed S] [--force]\n"
+    "       msgs synth --raw micasense|dji|sequoia --out DIR [--preset P] [--captures N] [--width W]\n"
+    "                  [--seed S] [--force]\n"
     "\n"
     "Ray-trace a procedural outdoor scene (lawn, soil, trees, solar panels, pond, painted pad) seen\n"
     "by a 5-camera drone rig (RGB + G, R, RE, NIR) and write it in the public multi-spectral dataset\n"
@@ -20,15 +25,54 @@ constexpr const char* kUsage =
     "  --preset P   tiny (tests, ~1 s), small (demo), medium (studies); default tiny\n"
     "  --out DIR    output directory (must not exist unless --force)\n"
     "  --seed S     scene and flight seed (default 1); the same seed gives identical files\n"
-    "  --force      replace an existing DIR once the new dataset is complete\n";
+    "  --force      replace an existing DIR once the new dataset is complete\n"
+    "\n"
+    "With --raw CAMERA, write instead a folder of raw captures as that camera would (input for\n"
+    "`msgs import`): its file names (MicaSense IMG_0001_1.tif..._5.tif, DJI Mavic 3M\n"
+    "DJI_<datetime>_0001_MS_G.TIF ... _D.JPG, Parrot Sequoia IMG_<date>_<time>_0001_GRE.TIF ... _RGB.JPG),\n"
+    "16-bit TIFFs with per-capture exposure time and ISO, black level and vignetting in the digital\n"
+    "numbers, and the camera's metadata tags as XMP (band, wavelength, black level, exposure, ISO/gain,\n"
+    "vignetting polynomial and centre, focal length and focal-plane resolution).\n"
+    "  --captures N number of captures (default: the preset's)\n"
+    "  --width W    multispectral image width in pixels (height 3/4 of it, RGB 1.5x; default: the preset's)\n";
+
+int run_raw(const msgs::cli::Args& args) {
+  msgs::synth::RawOptions opt;
+  opt.camera = args.get("raw");
+  opt.preset = args.get("preset", "tiny");
+  const long seed = args.integer("seed", 1), captures = args.integer("captures", 0), width = args.integer("width", 0);
+  if (seed < 0) throw msgs::cli::UsageError("option --seed expects a non-negative integer");
+  opt.seed = static_cast<std::uint64_t>(seed);
+  opt.captures = static_cast<int>(std::clamp(captures, -1L, 1000000L));
+  opt.width = static_cast<int>(std::clamp(width, -1L, 1000000L));
+  opt.overwrite = args.flag("force");
+  const std::string out = args.require("out");
+  msgs::synth::RawSummary s;
+  try {
+    s = msgs::synth::write_synthetic_raw(out, opt);
+  } catch (const std::invalid_argument& e) {
+    throw msgs::cli::UsageError(e.what());
+  }
+  std::printf("synthetic raw %s captures (preset %s, seed %llu) written to %s\n", s.camera.c_str(), opt.preset.c_str(),
+              static_cast<unsigned long long>(opt.seed), s.out.string().c_str());
+  std::printf("  captures: %d, files: %d\n", s.captures, s.files);
+  std::printf("  multispectral %d x %d (16-bit TIFF)", s.ms_width, s.ms_height);
+  if (s.camera != "micasense") std::printf(", RGB %d x %d (JPEG)", s.rgb_width, s.rgb_height);
+  std::printf("\n  exposure 1/%.0f .. 1/%.0f s, ISO %d .. %d\n", 1.0 / s.min_exposure_s, 1.0 / s.max_exposure_s, s.min_iso,
+              s.max_iso);
+  std::printf("  time: %.2f s\n", s.seconds);
+  return 0;
+}
 
 int run_synth(const std::vector<std::string>& argv) {
-  const msgs::cli::Args args(argv, {"preset", "out", "seed"}, {"force", "help"});
+  const msgs::cli::Args args(argv, {"preset", "out", "seed", "raw", "captures", "width"}, {"force", "help"});
   if (args.flag("help")) {
     std::fputs(kUsage, stdout);
     return 0;
   }
   if (!args.positional().empty()) throw msgs::cli::UsageError("unexpected argument '" + args.positional()[0] + "'");
+  if (args.has("raw")) return run_raw(args);
+  if (args.has("captures") || args.has("width")) throw msgs::cli::UsageError("--captures and --width need --raw");
   msgs::synth::SynthOptions opt;
   opt.preset = args.get("preset", "tiny");
   try {

@@ -9,7 +9,7 @@ secs=${1:-25}
 dir=${2:-build-fuzz}
 cxx=${MSGS_FUZZ_CXX:-clang++-14}
 jobs=$(nproc 2>/dev/null || echo 2)
-targets=(fuzz_ply fuzz_dataset fuzz_image fuzz_colmap)
+targets=(fuzz_ply fuzz_dataset fuzz_image fuzz_colmap fuzz_import_meta)
 cmake -S . -B "$dir" -DCMAKE_BUILD_TYPE=Release -DCMAKE_CXX_COMPILER="$cxx" -DMSGS_BUILD_FUZZ=ON \
   -DMSGS_BUILD_TESTS=OFF -DMSGS_BUILD_BENCHMARKS=OFF -DMSGS_BUILD_EXAMPLES=OFF >/dev/null
 cmake --build "$dir" -j "$jobs" --target "${targets[@]}"

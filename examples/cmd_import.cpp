@@ -1,0 +1,611 @@
+// examples/cmd_import.cpp
+// `msgs import`: a folder of raw multi-band captures (MicaSense, DJI Mavic 3M, Parrot Sequoia, or
+// explicit file-name patterns) -> the multi-spectral dataset layout: radiometric normalisation from
+// the metadata (read with the exiv2 tool), poses and a sparse point cloud from COLMAP (CPU).
+// File-name recognition, metadata parsing and the normalisation maths live in the library
+// (msgs/io/capture_names.hpp, capture_meta.hpp, radiometry.hpp); this file runs the tools.
+#include <tiffio.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <map>
+#include <set>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include <msgs/io/capture_meta.hpp>
+#include <msgs/io/capture_names.hpp>
+#include <msgs/io/colmap.hpp>
+#include <msgs/io/dataset.hpp>
+#include <msgs/io/file.hpp>
+#include <msgs/io/image_io.hpp>
+#include <msgs/io/ply.hpp>
+#include <msgs/io/radiometry.hpp>
+
+#include "commands.hpp"
+#include "subprocess.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using msgs::io::cat;
+using msgs::io::fail;
+
+constexpr const char* kUsage =
+    "usage: msgs import --images DIR --out DIR [--camera auto|micasense|dji|sequoia]\n"
+    "                   [--bands PATTERN=ID,...] [--eval-every N] [--camera-model M]\n"
+    "                   [--radiometry auto|none] [--allow-partial] [--force]\n"
+    "                   [--colmap BIN] [--exiv2 BIN] [--keep-work]\n"
+    "\n"
+    "Turn a folder of raw multi-band captures into the multi-spectral dataset layout (transforms.json,\n"
+    "train_split.json, images/, sparse_pc.ply) that `msgs train` reads.\n"
+    "\n"
+    "  1. Captures and bands from the file names: MicaSense RedEdge/Altum IMG_0001_1.tif.._5.tif\n"
+    "     (1 Blue, 2 Green, 3 Red, 4 NIR, 5 RedEdge), DJI Mavic 3M DJI_<datetime>_0001_MS_G.TIF,\n"
+    "     _MS_R, _MS_RE, _MS_NIR, _D.JPG, Parrot Sequoia IMG_<date>_<time>_0001_GRE.TIF, _RED, _REG,\n"
+    "     _NIR, _RGB.JPG. Bands msgs has no slot for (blue, thermal) are skipped with a warning.\n"
+    "  2. Radiometry from the metadata (exiv2): (DN - black level) / (exposure time x gain x\n"
+    "     vignetting), then one common factor per band so the band's brightest value is 1; written\n"
+    "     as 16-bit PNG and recorded per frame under \"radiometry\" in transforms.json. Steps whose\n"
+    "     tags are missing are left out for that band, with a warning naming the files.\n"
+    "  3. Poses with COLMAP on the CPU (feature_extractor with one camera per band and the focal\n"
+    "     length from the metadata as prior, exhaustive_matcher, mapper) on 8-bit copies; the\n"
+    "     largest model is kept. Every image must register (else an error names the ones that did not).\n"
+    "Everything is built in a temporary folder beside --out and renamed into place at the end.\n"
+    "\n"
+    "  --images DIR        folder of captures (searched recursively)\n"
+    "  --out DIR           output dataset folder (must not exist unless --force)\n"
+    "  --camera C          file-name scheme: auto (default: the one that matches most files),\n"
+    "                      micasense, dji, sequoia\n"
+    "  --bands LIST        explicit patterns instead: PATTERN=ID,... with * and ? wildcards matching\n"
+    "                      the capture number, ID one of D, MS_G, MS_R, MS_RE, MS_NIR or skip,\n"
+    "                      e.g. --bands 'IMG_*_2.tif=MS_G,IMG_*_3.tif=MS_R,IMG_*_5.tif=MS_RE,IMG_*_4.tif=MS_NIR'\n"
+    "  --eval-every N      every N-th capture (all its bands) goes to eval (default 10; 0: none)\n"
+    "  --camera-model M    COLMAP camera model: OPENCV (default), PINHOLE, SIMPLE_RADIAL, RADIAL\n"
+    "  --radiometry R      auto (default: use the metadata) or none (keep the stored values)\n"
+    "  --allow-partial     drop images COLMAP could not register (with a warning) instead of failing\n"
+    "  --force             replace an existing --out once the new dataset is complete\n"
+    "  --colmap BIN        COLMAP executable (default: colmap on PATH)\n"
+    "  --exiv2 BIN         exiv2 executable (default: exiv2 on PATH)\n"
+    "  --keep-work         keep the temporary folder (COLMAP database, logs) for inspection\n";
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+
+/// One image of the import.
+struct Item {
+  std::size_t capture = 0;  ///< index into the sorted captures
+  std::string band;
+  fs::path source;          ///< relative to --images
+  std::string out_name;     ///< images/<out_name> in the layout
+  std::string colmap_name;  ///< <band>/<name>.png under the COLMAP image folder
+  msgs::io::CaptureMeta meta;
+  msgs::io::FrameRadiometry rad;
+  bool radiometry_applied = false;
+  int width = 0, height = 0;
+};
+
+/// Removes a directory tree on scope exit unless released.
+struct TreeGuard {
+  fs::path dir;
+  bool armed = true;
+  ~TreeGuard() {
+    if (!armed || dir.empty()) return;
+    std::error_code ec;
+    fs::remove_all(dir, ec);
+  }
+};
+
+fs::path sibling(const fs::path& out, const char* tag) {
+  char buf[40];
+  const auto stamp = static_cast<unsigned long long>(Clock::now().time_since_epoch().count());
+  std::snprintf(buf, sizeof buf, "%llx-%d", stamp, static_cast<int>(::getpid()));
+  return out.parent_path() / cat(".", out.filename().string(), tag, buf);
+}
+
+/// Bits per sample of a TIFF (0 when it is not a readable TIFF).
+int tiff_bits(const fs::path& p) {
+  msgs::io::detail::TiffFile tf(p, "r");
+  if (!tf.get()) return 0;
+  std::uint16_t bits = 0;
+  TIFFGetFieldDefaulted(tf.get(), TIFFTAG_BITSPERSAMPLE, &bits);
+  return bits;
+}
+
+std::string list_some(const std::vector<std::string>& v, std::size_t n = 6) {
+  std::string s;
+  for (std::size_t i = 0; i < v.size() && i < n; ++i) s += cat(i ? ", " : "", v[i]);
+  if (v.size() > n) s += cat(", ... (", v.size(), " in all)");
+  return s;
+}
+
+/// A colmap stage with progress, timing, log and the log's tail on failure.
+double run_colmap(const std::string& colmap, const std::string& stage, std::vector<std::string> args,
+                  const fs::path& log) {
+  std::printf("  colmap %-18s ...", stage.c_str());
+  std::fflush(stdout);
+  const auto t = Clock::now();
+  args.insert(args.begin(), {colmap, stage});
+  {
+    std::FILE* f = std::fopen(log.c_str(), "a");
+    if (f) {
+      std::string line;
+      for (const auto& a : args) line += a + " ";
+      std::fprintf(f, "\n==== %s\n", line.c_str());
+      std::fclose(f);
+    }
+  }
+  const int rc = msgs::cli::run_process(args, log, log);
+  const double s = since(t);
+  if (rc != 0) {
+    std::printf(" failed (exit %d) after %.1f s\n", rc, s);
+    std::fflush(stdout);
+    const std::string hint =
+        stage == "mapper" ? "\n  (no initial pair or too few matches: images too small (COLMAP needed >= 160 px wide "
+                            "for the synthetic captures), too little texture or overlap, or too few captures?)"
+                          : "";
+    throw msgs::io::IoError(cat("colmap ", stage, " failed with exit status ", rc, "; last lines of its log",
+                                " (--keep-work keeps the whole log):\n", msgs::cli::tail_lines(log, 25), hint));
+  }
+  std::printf(" %6.1f s\n", s);
+  std::fflush(stdout);
+  return s;
+}
+
+/// 8-bit copy for SIFT: each image stretched from its 0.5th to 99.5th percentile to [0, 1] (the
+/// normalised bands can be dark; SIFT's contrast threshold is absolute).
+msgs::Image<float> sift_copy(const msgs::Image<float>& img) {
+  std::vector<float> v = img.data;
+  if (v.empty()) return img;
+  const std::size_t lo = v.size() / 200, hi = v.size() - 1 - v.size() / 200;
+  std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(lo), v.end());
+  const float a = v[lo];
+  std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(hi), v.end());
+  const float b = v[hi];
+  msgs::Image<float> out = img;
+  const float k = b > a ? 1.0f / (b - a) : 1.0f;
+  for (float& x : out.data) x = std::clamp((x - a) * k, 0.0f, 1.0f);
+  return out;
+}
+
+/// Float to the shortest double that reads back as the same float (135.365265, not 135.36526489257813).
+double tidy(float v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.9g", double(v));
+  const double d = std::strtod(buf, nullptr);
+  return d == 0.0 ? 0.0 : d;  // no "-0.0"
+}
+
+nlohmann::ordered_json opt_number(const std::optional<double>& v) {
+  return v ? nlohmann::ordered_json(*v) : nlohmann::ordered_json(nullptr);
+}
+
+int run_import(const std::vector<std::string>& argv) {
+  const msgs::cli::Args args(argv,
+                             {"images", "out", "camera", "bands", "eval-every", "camera-model", "radiometry", "colmap", "exiv2"},
+                             {"force", "allow-partial", "keep-work", "help"});
+  if (args.flag("help")) {
+    std::fputs(kUsage, stdout);
+    return 0;
+  }
+  if (!args.positional().empty()) throw msgs::cli::UsageError("unexpected argument '" + args.positional()[0] + "'");
+  const auto t_start = Clock::now();
+  const fs::path images = fs::absolute(args.require("images")).lexically_normal();
+  fs::path out = fs::absolute(args.require("out")).lexically_normal();
+  if (out.filename().empty()) out = out.parent_path();
+  const std::string camera = args.get("camera", "auto");
+  if (camera != "auto" && camera != "micasense" && camera != "dji" && camera != "sequoia")
+    throw msgs::cli::UsageError("--camera expects auto, micasense, dji or sequoia, got '" + camera + "'");
+  std::vector<msgs::io::BandPattern> patterns;
+  if (args.has("bands")) {
+    try {
+      patterns = msgs::io::parse_band_patterns(args.get("bands"));
+    } catch (const std::invalid_argument& e) {
+      throw msgs::cli::UsageError(e.what());
+    }
+  }
+  const long eval_every = args.integer("eval-every", 10);
+  if (eval_every < 0) throw msgs::cli::UsageError("--eval-every expects a non-negative integer");
+  const std::string model = args.get("camera-model", "OPENCV");
+  const std::map<std::string, int> model_params = {{"OPENCV", 8}, {"PINHOLE", 4}, {"SIMPLE_RADIAL", 4}, {"RADIAL", 5}};
+  if (!model_params.count(model))
+    throw msgs::cli::UsageError("--camera-model expects OPENCV, PINHOLE, SIMPLE_RADIAL or RADIAL, got '" + model + "'");
+  const std::string radiometry = args.get("radiometry", "auto");
+  if (radiometry != "auto" && radiometry != "none")
+    throw msgs::cli::UsageError("--radiometry expects auto or none, got '" + radiometry + "'");
+
+  std::error_code ec;
+  if (!fs::is_directory(images, ec)) fail(images, "--images folder does not exist or is not a folder");
+  if (fs::exists(out, ec) && !args.flag("force"))
+    fail(out, "output folder already exists (choose another --out, or replace it with --force)");
+  if (out == images || images.lexically_relative(out).string().rfind("..", 0) != 0)
+    fail(out, "--out must not be the --images folder or contain it");
+  const std::string colmap_arg = args.get("colmap", "colmap");
+  const auto colmap = msgs::cli::find_program(colmap_arg);
+  if (!colmap)
+    fail(colmap_arg, "COLMAP executable not found (install it: apt-get install --no-install-recommends colmap, "
+                     "or point --colmap at it)");
+  // Headless COLMAP: its Qt must not look for a display.
+  ::setenv("QT_QPA_PLATFORM", "offscreen", 0);
+
+  // ---- 1. captures from the file names
+  std::vector<fs::path> files;
+  for (auto it = fs::recursive_directory_iterator(images, fs::directory_options::skip_permission_denied, ec);
+       !ec && it != fs::recursive_directory_iterator(); it.increment(ec)) {
+    const fs::path rel = it->path().lexically_relative(images);
+    if (rel.filename().string().rfind('.', 0) == 0) {  // hidden files and folders
+      if (it->is_directory(ec)) it.disable_recursion_pending();
+      continue;
+    }
+    if (it->is_regular_file(ec)) files.push_back(rel);
+  }
+  if (ec) fail(images, cat("cannot list the folder: ", ec.message()));
+  std::sort(files.begin(), files.end());
+  const msgs::io::CaptureScan scan = msgs::io::scan_capture_names(images, files, camera, patterns);
+  const auto counts = scan.band_counts();
+  std::string band_list;
+  for (const auto& b : msgs::io::standard_bands())
+    if (counts.count(b.id)) band_list += cat(band_list.empty() ? "" : ", ", b.id, " ", counts.at(b.id));
+  std::printf("import: %s, %zu captures x %zu bands (%s) from %s\n", scan.camera.c_str(), scan.captures.size(),
+              counts.size(), band_list.c_str(), images.string().c_str());
+  for (const auto& [name, fl] : scan.skipped) {
+    std::vector<std::string> names;
+    for (const auto& f : fl) names.push_back(f.generic_string());
+    std::printf("  warning: skipping band %s (no msgs band slot): %s\n", name.c_str(), list_some(names, 3).c_str());
+  }
+  if (!scan.unmatched.empty()) {
+    std::vector<std::string> names;
+    for (const auto& f : scan.unmatched) names.push_back(f.generic_string());
+    std::printf("  warning: %zu files match no pattern and are ignored: %s\n", names.size(), list_some(names, 4).c_str());
+  }
+  {
+    std::vector<std::string> incomplete;
+    for (const auto& c : scan.captures)
+      if (c.bands.size() != counts.size()) incomplete.push_back(c.key);
+    if (!incomplete.empty())
+      std::printf("  warning: %zu captures lack some band: %s\n", incomplete.size(), list_some(incomplete).c_str());
+  }
+
+  std::vector<Item> items;
+  for (std::size_t ci = 0; ci < scan.captures.size(); ++ci)
+    for (const auto& b : msgs::io::standard_bands()) {
+      const auto it = scan.captures[ci].bands.find(b.id);
+      if (it == scan.captures[ci].bands.end()) continue;
+      Item item;
+      item.capture = ci;
+      item.band = b.id;
+      item.source = it->second;
+      char num[32];
+      std::snprintf(num, sizeof num, "_%05zu", ci + 1);
+      const bool rgb = b.channels == 3;
+      std::string ext = rgb ? it->second.extension().string() : ".png";
+      for (char& ch : ext) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+      item.out_name = cat(b.id, num, ext);
+      item.colmap_name = cat(b.id, "/", b.id, num, ".png");
+      items.push_back(std::move(item));
+    }
+
+  // ---- temporary folders: layout (renamed to --out at the end) and COLMAP work
+  fs::create_directories(out.parent_path(), ec);
+  if (ec) fail(out.parent_path(), cat("cannot create the parent folder: ", ec.message()));
+  const fs::path tmp = sibling(out, ".import-tmp-");
+  const fs::path layout = tmp / "layout", work = tmp / "work";
+  fs::create_directories(layout / "images", ec);
+  if (!ec) fs::create_directories(work / "images", ec);
+  if (ec) fail(tmp, cat("cannot create the temporary folder: ", ec.message()));
+  TreeGuard guard{tmp};
+  if (args.flag("keep-work")) guard.armed = false;
+  const fs::path log = work / "colmap.log";
+
+  // ---- 2. metadata (exiv2)
+  const auto t_meta = Clock::now();
+  bool have_meta = false;
+  if (radiometry == "auto") {
+    const std::string exiv2_arg = args.get("exiv2", "exiv2");
+    if (!msgs::cli::find_program(exiv2_arg)) {
+      std::printf("  warning: exiv2 not found (install it: apt-get install exiv2); keeping the stored values "
+                  "(no radiometric normalisation)\n");
+    } else {
+      have_meta = true;
+      const std::size_t batch = 64;
+      for (std::size_t i0 = 0; i0 < items.size(); i0 += batch) {
+        const std::size_t i1 = std::min(items.size(), i0 + batch);
+        std::vector<std::string> cmd = {exiv2_arg, "-q", "-P", "kv"};
+        for (const auto& k : msgs::io::exiv2_metadata_keys()) {
+          cmd.push_back("-K");
+          cmd.push_back(k);
+        }
+        std::vector<std::string> names;
+        for (std::size_t i = i0; i < i1; ++i) names.push_back((images / items[i].source).string());
+        // exiv2 prefixes every line with the file name only when given several files.
+        if (names.size() == 1) names.push_back(names[0]);
+        cmd.insert(cmd.end(), names.begin(), names.end());
+        const fs::path txt = work / cat("exiv2_", i0, ".txt");
+        const int rc = msgs::cli::run_process(cmd, txt, work / "exiv2.log");
+        // exiv2 exits non-zero when a file has none of the keys; only a missing output is an error.
+        const std::string text = fs::exists(txt, ec) ? msgs::io::read_text(txt) : std::string();
+        if (rc != 0 && text.empty() && rc != 1 && rc != 253)
+          throw msgs::io::IoError(cat(exiv2_arg, " failed with exit status ", rc, " (--radiometry none skips it):\n",
+                                      msgs::cli::tail_lines(work / "exiv2.log", 10)));
+        const auto per_file = msgs::io::split_exiv2_output(text, names);
+        for (std::size_t i = i0; i < i1; ++i) items[i].meta = msgs::io::parse_capture_meta(per_file[i - i0], images / items[i].source);
+      }
+    }
+  }
+
+  // ---- 3. radiometry: plan per band, pass 1 for the band maxima, pass 2 writes
+  std::map<std::string, std::vector<std::size_t>> by_band;
+  for (std::size_t i = 0; i < items.size(); ++i) by_band[items[i].band].push_back(i);
+  std::map<std::string, double> band_max;
+  for (const auto& [band, idx] : by_band) {
+    if (band == "D") continue;
+    msgs::io::RadiometrySteps steps;
+    if (have_meta) {
+      std::vector<msgs::io::CaptureMeta> metas;
+      std::vector<fs::path> srcs;
+      for (std::size_t i : idx) {
+        metas.push_back(items[i].meta);
+        srcs.push_back(items[i].source);
+      }
+      const auto plan = msgs::io::plan_band(metas, srcs);
+      steps = plan.steps;
+      if (!plan.missing.empty()) {
+        std::string what;
+        for (const auto& [tag, lacking] : plan.missing) {
+          std::vector<std::string> names;
+          for (const auto& f : lacking) names.push_back(f.generic_string());
+          what += cat("\n    ", tag, " missing in ", lacking.size(), " of ", idx.size(), " files: ", list_some(names, 3));
+        }
+        std::printf("  warning: %s: corrections left out for the whole band (%s):%s\n", band.c_str(),
+                    steps.any() ? "the others are applied" : "stored values kept", what.c_str());
+      }
+    }
+    double mx = 0.0;
+    for (std::size_t i : idx) {
+      Item& it = items[i];
+      const fs::path src = images / it.source;
+      const int bits = tiff_bits(src);
+      const double dn_max = bits == 16 ? 65535.0 : bits == 8 || bits == 0 ? 255.0 : 1.0;
+      if (bits != 8 && bits != 16 && bits != 0) fail(src, cat("unsupported ", bits, "-bit samples for a multispectral band (need 8 or 16)"));
+      it.rad = msgs::io::frame_radiometry(it.meta, steps, dn_max);
+      it.radiometry_applied = steps.any();
+      const msgs::Image<float> raw = msgs::io::read_image(src);
+      if (raw.channels != 1) fail(src, cat("band ", band, " needs a single-channel image, this one has ", raw.channels));
+      it.width = raw.width;
+      it.height = raw.height;
+      if (it.radiometry_applied) mx = std::max(mx, double(msgs::io::max_value(msgs::io::normalise_image(raw, it.rad, src))));
+    }
+    band_max[band] = mx;
+    for (std::size_t i : idx)
+      items[i].rad.scale = items[i].radiometry_applied ? msgs::io::band_scale(mx) : 1.0 / items[i].rad.dn_max;
+  }
+  for (Item& it : items) {
+    const fs::path src = images / it.source;
+    const msgs::Image<float> raw = msgs::io::read_image(src);
+    fs::create_directories((work / "images" / it.colmap_name).parent_path(), ec);
+    if (it.band == "D") {
+      if (raw.channels < 3) fail(src, "band D (RGB) needs a colour image");
+      it.width = raw.width;
+      it.height = raw.height;
+      fs::copy_file(src, layout / "images" / it.out_name, ec);
+      if (ec) fail(layout / "images" / it.out_name, cat("cannot copy ", src.string(), ": ", ec.message()));
+      msgs::io::write_png8(work / "images" / it.colmap_name, raw);
+      continue;
+    }
+    msgs::Image<float> norm = msgs::io::normalise_image(raw, it.rad, src);
+    for (float& v : norm.data) v = std::min(v, 1.0f);
+    msgs::io::write_png16(layout / "images" / it.out_name, norm);
+    msgs::io::write_png8(work / "images" / it.colmap_name, sift_copy(norm));
+  }
+  std::printf("  radiometry and copies: %zu images in %.1f s\n", items.size(), since(t_meta));
+  std::fflush(stdout);
+
+  // ---- 4. COLMAP
+  std::map<std::string, double> timings;
+  const std::string db = (work / "database.db").string();
+  double t_features = 0.0;
+  for (const auto& [band, idx] : by_band) {
+    const fs::path list = work / cat("list_", band, ".txt");
+    std::string text;
+    for (std::size_t i : idx) text += items[i].colmap_name + "\n";
+    msgs::io::write_text_atomic(list, text);
+    std::vector<std::string> a = {"--database_path", db, "--image_path", (work / "images").string(), "--image_list_path",
+                                  list.string(), "--ImageReader.single_camera", "1", "--ImageReader.camera_model", model,
+                                  "--SiftExtraction.use_gpu", "0"};
+    // Focal length prior from the metadata: median over the band's images of mm x pixels/mm.
+    std::vector<double> f;
+    for (std::size_t i : idx)
+      if (auto fp = items[i].meta.focal_px()) f.push_back(*fp);
+    const Item& first = items[idx.front()];
+    if (f.size() == idx.size()) {
+      std::nth_element(f.begin(), f.begin() + std::ptrdiff_t(f.size() / 2), f.end());
+      const double fpx = f[f.size() / 2], cx = first.width / 2.0, cy = first.height / 2.0;
+      std::string p = model == "PINHOLE" ? cat(fpx, ",", fpx, ",", cx, ",", cy)
+                      : model == "OPENCV" ? cat(fpx, ",", fpx, ",", cx, ",", cy, ",0,0,0,0")
+                      : model == "SIMPLE_RADIAL" ? cat(fpx, ",", cx, ",", cy, ",0")
+                                                 : cat(fpx, ",", cx, ",", cy, ",0,0");
+      a.push_back("--ImageReader.camera_params");
+      a.push_back(p);
+      std::printf("  %s: focal length prior %.1f px from the metadata\n", band.c_str(), fpx);
+    } else {
+      std::printf("  %s: no focal length + focal-plane resolution in the metadata; COLMAP guesses the focal length\n",
+                  band.c_str());
+    }
+    t_features += run_colmap(colmap->string(), "feature_extractor", a, log);
+  }
+  timings["features"] = t_features;
+  timings["matching"] = run_colmap(colmap->string(), "exhaustive_matcher",
+                                   {"--database_path", db, "--SiftMatching.use_gpu", "0"}, log);
+  fs::create_directories(work / "sparse", ec);
+  timings["mapping"] = run_colmap(colmap->string(), "mapper",
+                                  {"--database_path", db, "--image_path", (work / "images").string(), "--output_path",
+                                   (work / "sparse").string()},
+                                  log);
+
+  // ---- 5. the largest model, registration check
+  fs::path best_dir;
+  msgs::io::ColmapModel best;
+  int n_models = 0;
+  for (const auto& e : fs::directory_iterator(work / "sparse", ec)) {
+    if (!e.is_directory()) continue;
+    msgs::io::ColmapModel m = msgs::io::read_colmap(e.path());
+    ++n_models;
+    if (best_dir.empty() || m.images.size() > best.images.size()) {
+      best = std::move(m);
+      best_dir = e.path();
+    }
+  }
+  if (best_dir.empty())
+    throw msgs::io::IoError(cat("COLMAP's mapper reconstructed nothing (too few matches between the images?); ",
+                                "last lines of its log:\n", msgs::cli::tail_lines(log, 15)));
+  std::map<std::string, const msgs::io::ColmapImage*> registered;
+  for (const auto& im : best.images) registered[im.name] = &im;
+  std::vector<std::string> missing;
+  for (const auto& it : items)
+    if (!registered.count(it.colmap_name)) missing.push_back(cat(it.source.generic_string(), " (", it.band, ")"));
+  if (n_models > 1)
+    std::printf("  warning: COLMAP made %d separate models; keeping the largest (%zu images)\n", n_models, best.images.size());
+  if (!missing.empty()) {
+    if (!args.flag("allow-partial"))
+      fail(images, cat(missing.size(), " of ", items.size(), " images did not register in COLMAP's model: ",
+                       list_some(missing, 12),
+                       "\n  (too little texture or overlap, or bands too different to match across? "
+                       "--allow-partial drops them and goes on)"));
+    std::printf("  warning: dropping %zu images that did not register: %s\n", missing.size(), list_some(missing, 8).c_str());
+  }
+  // Mean reprojection error from model_analyzer.
+  std::optional<double> reproj;
+  {
+    const fs::path alog = work / "model_analyzer.log";
+    const int rc = msgs::cli::run_process({colmap->string(), "model_analyzer", "--path", best_dir.string()}, alog, alog);
+    if (rc == 0) {
+      const std::string text = msgs::io::read_text(alog);
+      const auto p = text.find("Mean reprojection error:");
+      if (p != std::string::npos) {
+        double v = 0;
+        if (std::sscanf(text.c_str() + p, "Mean reprojection error: %lfpx", &v) == 1 && std::isfinite(v)) reproj = v;
+      }
+    }
+  }
+
+  // ---- 6. the layout
+  nlohmann::ordered_json tf;
+  tf["ply_file_path"] = "sparse_pc.ply";
+  nlohmann::ordered_json meta_json;
+  meta_json["camera"] = scan.camera;
+  meta_json["source"] = images.string();
+  meta_json["captures"] = scan.captures.size();
+  meta_json["registered"] = items.size() - missing.size();
+  meta_json["images"] = items.size();
+  meta_json["mean_reprojection_error_px"] = opt_number(reproj);
+  meta_json["colmap_camera_model"] = model;
+  tf["msgs_import"] = meta_json;
+  nlohmann::ordered_json frames = nlohmann::ordered_json::array();
+  std::vector<std::string> train, eval;
+  std::size_t n_frames = 0;
+  for (const Item& it : items) {
+    const auto reg = registered.find(it.colmap_name);
+    if (reg == registered.end()) {
+      fs::remove(layout / "images" / it.out_name, ec);
+      continue;
+    }
+    const msgs::io::ColmapImage& im = *reg->second;
+    nlohmann::ordered_json f;
+    f["file_path"] = "images/" + it.out_name;
+    f["mm_channel"] = it.band;
+    f["fl_x"] = tidy(im.camera.fx);
+    f["fl_y"] = tidy(im.camera.fy);
+    f["cx"] = tidy(im.camera.cx);
+    f["cy"] = tidy(im.camera.cy);
+    f["w"] = im.camera.width;
+    f["h"] = im.camera.height;
+    using M = msgs::io::Distortion::Model;
+    f["camera_model"] = im.dist.model == M::none ? "PINHOLE" : im.dist.model == M::fisheye ? "OPENCV_FISHEYE" : "OPENCV";
+    f["k1"] = im.dist.k1;
+    f["k2"] = im.dist.k2;
+    f["k3"] = im.dist.k3;
+    f["k4"] = im.dist.k4;
+    f["p1"] = im.dist.p1;
+    f["p2"] = im.dist.p2;
+    const Eigen::Matrix4f c2w = im.camera.opengl_c2w();
+    nlohmann::ordered_json rows = nlohmann::ordered_json::array();
+    for (int r = 0; r < 4; ++r) {
+      nlohmann::ordered_json row = nlohmann::ordered_json::array();
+      for (int c = 0; c < 4; ++c) row.push_back(tidy(c2w(r, c)));
+      rows.push_back(row);
+    }
+    f["transform_matrix"] = rows;
+    f["source"] = it.source.generic_string();
+    f["capture"] = scan.captures[it.capture].key;
+    nlohmann::ordered_json rad;
+    if (it.band == "D") {
+      rad["applied"] = false;
+      rad["note"] = "RGB camera: the camera's sRGB values are kept";
+    } else {
+      rad["applied"] = it.radiometry_applied;
+      const auto& s = it.rad.steps;
+      rad["black_level"] = s.black_level ? nlohmann::ordered_json(it.rad.black_level) : nlohmann::ordered_json(nullptr);
+      rad["exposure_s"] = s.exposure ? nlohmann::ordered_json(it.rad.exposure_s) : nlohmann::ordered_json(nullptr);
+      rad["gain"] = s.gain ? nlohmann::ordered_json(it.rad.gain) : nlohmann::ordered_json(nullptr);
+      rad["vignetting"] = s.vignetting;
+      rad["scale"] = it.rad.scale;
+      rad["dn_max"] = it.rad.dn_max;
+      rad["formula"] = it.radiometry_applied
+                           ? "value = (DN - black_level) / (exposure_s * gain * vignetting(r)) * scale"
+                           : "value = DN / dn_max (stored values kept: no radiometric metadata)";
+      if (it.meta.band_name) rad["band_name"] = *it.meta.band_name;
+      if (it.meta.wavelength_nm) rad["wavelength_nm"] = *it.meta.wavelength_nm;
+    }
+    f["radiometry"] = rad;
+    frames.push_back(f);
+    const bool ev = eval_every > 0 && it.capture % static_cast<std::size_t>(eval_every) == 0;
+    (ev ? eval : train).push_back("images/" + it.out_name);
+    ++n_frames;
+  }
+  tf["frames"] = frames;
+  msgs::io::write_text_atomic(layout / "transforms.json", tf.dump(2) + "\n");
+  nlohmann::ordered_json split;
+  split["train"] = train;
+  split["eval"] = eval;
+  msgs::io::write_text_atomic(layout / "train_split.json", split.dump(2) + "\n");
+  msgs::io::write_point_cloud(layout / "sparse_pc.ply", best.points);
+  // Self-check: the layout loads.
+  const msgs::io::Dataset check = msgs::io::load_dataset(layout);
+  if (check.frames.size() != n_frames) fail(layout / "transforms.json", "self-check: frame count differs after loading");
+
+  // ---- 7. into place
+  fs::path old;
+  if (fs::exists(out, ec)) {
+    old = sibling(out, ".import-old-");
+    fs::rename(out, old, ec);
+    if (ec) fail(out, cat("cannot move the existing folder aside: ", ec.message()));
+  }
+  fs::rename(layout, out, ec);
+  if (ec) {
+    std::error_code ec2;
+    if (!old.empty()) fs::rename(old, out, ec2);
+    fail(out, cat("cannot rename the finished dataset into place: ", ec.message()));
+  }
+  if (!old.empty()) fs::remove_all(old, ec);
+  if (args.flag("keep-work")) std::printf("  work folder kept: %s\n", work.string().c_str());
+
+  std::printf("wrote %s\n", out.string().c_str());
+  std::printf("  frames: %zu (%zu train, %zu eval), registered %zu of %zu images in the largest of %d model(s)\n",
+              n_frames, train.size(), eval.size(), items.size() - missing.size(), items.size(), n_models);
+  std::printf("  sparse_pc.ply: %zu points, mean reprojection error %s\n", best.points.size(),
+              reproj ? cat(*reproj, " px").c_str() : "n/a");
+  std::printf("  time: %.1f s (features %.1f s, matching %.1f s, mapping %.1f s)\n", since(t_start), timings["features"],
+              timings["matching"], timings["mapping"]);
+  return 0;
+}
+
+}  // namespace
+
+MSGS_COMMAND("import", "Turn a folder of raw multi-band captures into the dataset layout (COLMAP + exiv2)", run_import);

@@ -1,0 +1,65 @@
+// fuzz/fuzz_import_meta.cpp
+// libFuzzer target for the pure parts of `msgs import`: exiv2 output parsing
+// (io::parse_capture_meta, io::split_exiv2_output), --bands pattern parsing and file-name
+// recognition (io::parse_band_patterns, io::scan_capture_names with every camera scheme).
+//
+// Input: exiv2 text, then optionally a NUL byte, a --bands spec line and file names one per line.
+// Acceptable outcomes: success, io::IoError, and std::invalid_argument from parse_band_patterns
+// (a usage error). Anything else aborts.
+#include <algorithm>
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "fuzz_common.hpp"
+#include "msgs/io/capture_meta.hpp"
+#include "msgs/io/capture_names.hpp"
+#include "msgs/io/radiometry.hpp"
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+  using namespace msgs;
+  const auto* begin = reinterpret_cast<const char*>(data);
+  const auto* end = begin + size;
+  const auto* nul = std::find(begin, end, '\0');
+  const std::string text(begin, nul);
+  std::vector<std::string> lines;
+  if (nul != end) {
+    std::string cur;
+    for (const char* p = nul + 1; p != end; ++p) {
+      if (*p == '\n') { lines.push_back(cur); cur.clear(); } else cur.push_back(*p);
+    }
+    lines.push_back(cur);
+  }
+
+  fuzz::expect_io_error_only("parse_capture_meta", [&] {
+    const io::CaptureMeta m = io::parse_capture_meta(text, "fuzz.tif");
+    // The plan and the per-frame parameters must also be safe to form (and to check).
+    const io::BandPlan plan = io::plan_band({m, m}, {"a.tif", "b.tif"});
+    io::FrameRadiometry r = io::frame_radiometry(m, plan.steps, 65535.0);
+    io::check_radiometry(r, 8, 6, "fuzz.tif");
+    (void)io::relative_radiance(1000.0, 3.0, 2.0, r);
+  });
+  std::vector<std::string> names(lines.begin() + (lines.empty() ? 0 : 1), lines.end());
+  fuzz::expect_io_error_only("split_exiv2_output", [&] {
+    const auto per = io::split_exiv2_output(text, names);
+    for (std::size_t i = 0; i < per.size(); ++i) (void)io::parse_capture_meta(per[i], "f");
+  });
+
+  std::vector<io::BandPattern> patterns;
+  if (!lines.empty()) {
+    try {
+      patterns = io::parse_band_patterns(lines[0]);
+    } catch (const std::invalid_argument&) {
+    }
+  }
+  std::vector<std::filesystem::path> files(names.begin(), names.end());
+  for (const char* cam : {"auto", "micasense", "dji", "sequoia"})
+    fuzz::expect_io_error_only("scan_capture_names", [&] { (void)io::scan_capture_names("/fuzz", files, cam); });
+  if (!patterns.empty())
+    fuzz::expect_io_error_only("scan_capture_names(patterns)",
+                               [&] { (void)io::scan_capture_names("/fuzz", files, "auto", patterns); });
+  return 0;
+}

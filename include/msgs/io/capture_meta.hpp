@@ -1,0 +1,301 @@
+// include/msgs/io/capture_meta.hpp
+// Radiometric and lens metadata of one multi-band image, parsed from the text the exiv2 command-line
+// tool prints (`exiv2 -q -P kv -K KEY ... FILE...`): band name, centre wavelength, black level,
+// exposure time, gain / ISO, vignetting model, focal length and focal-plane resolution.
+//
+// Keys read (first one present wins), as MicaSense, DJI and Parrot write them:
+//   band name     Xmp.Camera.BandName
+//   wavelength    Xmp.Camera.CentralWavelength (nm)
+//   black level   Exif.Image.BlackLevel (MicaSense, IFD0; several values are averaged),
+//                 Xmp.drone-dji.BlackLevel (DJI), Xmp.Camera.BlackLevel
+//   exposure      Exif.Photo.ExposureTime, Xmp.exif.ExposureTime (seconds, "1/1250" or decimal)
+//   gain          Xmp.drone-dji.SensorGain (a factor), else ISO / 100 from Exif.Photo.ISOSpeed,
+//                 Exif.Photo.ISOSpeedRatings, Xmp.exifEX.ISOSpeed, Xmp.exif.ISOSpeedRatings
+//   vignetting    Xmp.Camera.VignettingPolynomial + Xmp.Camera.VignettingCenter (MicaSense: the
+//                 fall-off 1 + k0 r + ... + k5 r^6, r in pixels; the image is divided by it), or
+//                 Xmp.drone-dji.VignettingData + Xmp.drone-dji.CalibratedOpticalCenterX/Y (DJI:
+//                 the correction 1 + k0 r + ..., which multiplies the image)
+//   focal length  Exif.Photo.FocalLength, Xmp.exif.FocalLength (mm)
+//   focal plane   Exif.Photo.FocalPlaneXResolution / YResolution / ResolutionUnit and the same in
+//                 Xmp.exif (unit 2 inch, the EXIF default, 3 cm, 4 mm, 5 micrometre)
+//   bit depth     Exif.Image.BitsPerSample
+// Parsing never crashes on odd text: lines that are not "KEY VALUE" are ignored, and a recognised
+// key whose value is not what it should be is an IoError naming the file, the key and the value.
+#pragma once
+
+#include <array>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <map>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "msgs/io/error.hpp"
+
+namespace msgs::io {
+
+/// How a vignetting polynomial p(r) = 1 + k0 r + k1 r^2 + ... relates to the image.
+enum class VignettingKind {
+  falloff,     ///< MicaSense: DN is proportional to p(r); divide by it
+  correction,  ///< DJI: p(r) is the correction; multiply by it
+};
+
+/// Metadata of one image. Absent tags stay empty; `source` says which key gave each quantity.
+struct CaptureMeta {
+  std::optional<std::string> band_name;
+  std::optional<double> wavelength_nm;
+  std::optional<double> black_level;   ///< in the file's digital numbers
+  std::optional<double> exposure_s;
+  std::optional<double> gain;          ///< linear factor (ISO / 100 when only ISO is given)
+  std::vector<double> vignetting_poly; ///< k0, k1, ... (empty: no vignetting model)
+  std::optional<std::array<double, 2>> vignetting_centre;  ///< pixels
+  VignettingKind vignetting_kind = VignettingKind::falloff;
+  std::optional<double> focal_length_mm;
+  std::optional<double> focal_plane_px_per_mm;  ///< x resolution, converted to pixels per mm
+  std::optional<int> bits_per_sample;
+  std::map<std::string, std::string> source;    ///< quantity -> exiv2 key it was read from
+
+  /// Focal length in pixels (focal length x focal-plane resolution), when both are known.
+  std::optional<double> focal_px() const {
+    if (focal_length_mm && focal_plane_px_per_mm) return *focal_length_mm * *focal_plane_px_per_mm;
+    return std::nullopt;
+  }
+  bool has_vignetting() const { return !vignetting_poly.empty() && vignetting_centre.has_value(); }
+};
+
+/// Every key capture_meta_from_exiv2 looks at, for `exiv2 -K`.
+inline const std::vector<std::string>& exiv2_metadata_keys() {
+  static const std::vector<std::string> keys = {
+      "Xmp.Camera.BandName", "Xmp.Camera.CentralWavelength", "Exif.Image.BlackLevel", "Xmp.drone-dji.BlackLevel",
+      "Xmp.Camera.BlackLevel", "Exif.Photo.ExposureTime", "Xmp.exif.ExposureTime", "Xmp.drone-dji.SensorGain",
+      "Exif.Photo.ISOSpeed", "Exif.Photo.ISOSpeedRatings", "Xmp.exifEX.ISOSpeed", "Xmp.exif.ISOSpeedRatings",
+      "Xmp.Camera.VignettingPolynomial", "Xmp.Camera.VignettingCenter", "Xmp.drone-dji.VignettingData",
+      "Xmp.drone-dji.CalibratedOpticalCenterX", "Xmp.drone-dji.CalibratedOpticalCenterY", "Exif.Photo.FocalLength",
+      "Xmp.exif.FocalLength", "Exif.Photo.FocalPlaneXResolution", "Exif.Photo.FocalPlaneResolutionUnit",
+      "Xmp.exif.FocalPlaneXResolution", "Xmp.exif.FocalPlaneResolutionUnit", "Exif.Image.BitsPerSample"};
+  return keys;
+}
+
+namespace detail {
+
+inline bool is_space(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\n' || c == '\v' || c == '\f'; }
+
+inline std::string_view trim(std::string_view s) {
+  while (!s.empty() && is_space(s.front())) s.remove_prefix(1);
+  while (!s.empty() && is_space(s.back())) s.remove_suffix(1);
+  return s;
+}
+
+/// A metadata key as exiv2 prints it: Family.Group.Name, letters, digits, '-' and '_'.
+inline bool looks_like_key(std::string_view k) {
+  if (k.size() < 5 || k.size() > 200) return false;
+  int dots = 0;
+  for (char c : k) {
+    if (c == '.') ++dots;
+    else if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '_')) return false;
+  }
+  return dots >= 2 && (k.rfind("Exif.", 0) == 0 || k.rfind("Xmp.", 0) == 0 || k.rfind("Iptc.", 0) == 0);
+}
+
+/// A finite number: decimal, or a rational "a/b" with b != 0. nullopt for anything else.
+inline std::optional<double> parse_number(std::string_view s) {
+  s = trim(s);
+  if (s.empty() || s.size() > 64) return std::nullopt;
+  const std::string str(s);
+  const std::size_t slash = str.find('/');
+  auto whole = [](const std::string& t) -> std::optional<double> {
+    if (t.empty()) return std::nullopt;
+    char* end = nullptr;
+    const double v = std::strtod(t.c_str(), &end);
+    if (end != t.c_str() + t.size() || !std::isfinite(v)) return std::nullopt;
+    return v;
+  };
+  if (slash == std::string::npos) return whole(str);
+  const auto a = whole(str.substr(0, slash)), b = whole(str.substr(slash + 1));
+  if (!a || !b || *b == 0.0) return std::nullopt;
+  const double v = *a / *b;
+  if (!std::isfinite(v)) return std::nullopt;
+  return v;
+}
+
+/// Numbers separated by commas and/or spaces ("1, 2, 3", "4800 4800 4800 4800"); nullopt when any
+/// piece is not a number or there is none.
+inline std::optional<std::vector<double>> parse_number_list(std::string_view s, std::size_t max_count = 64) {
+  std::vector<double> out;
+  std::size_t i = 0;
+  while (i < s.size()) {
+    while (i < s.size() && (is_space(s[i]) || s[i] == ',')) ++i;
+    std::size_t j = i;
+    while (j < s.size() && !is_space(s[j]) && s[j] != ',') ++j;
+    if (j > i) {
+      const auto v = parse_number(s.substr(i, j - i));
+      if (!v || out.size() >= max_count) return std::nullopt;
+      out.push_back(*v);
+    }
+    i = j;
+  }
+  if (out.empty()) return std::nullopt;
+  return out;
+}
+
+}  // namespace detail
+
+/// Parse exiv2's `-P kv` output for ONE file ("KEY<spaces>VALUE" per line) into key -> value.
+/// Lines that do not start with a metadata key are skipped (exiv2 warnings, continuation lines of
+/// multi-line values); for a repeated key the first value is kept.
+inline std::map<std::string, std::string> parse_exiv2_kv(std::string_view text) {
+  std::map<std::string, std::string> kv;
+  std::size_t pos = 0;
+  while (pos < text.size()) {
+    std::size_t eol = text.find('\n', pos);
+    if (eol == std::string_view::npos) eol = text.size();
+    std::string_view line = detail::trim(text.substr(pos, eol - pos));
+    pos = eol + 1;
+    std::size_t k = 0;
+    while (k < line.size() && !detail::is_space(line[k])) ++k;
+    const std::string_view key = line.substr(0, k);
+    if (!detail::looks_like_key(key)) continue;
+    kv.emplace(std::string(key), std::string(detail::trim(line.substr(k))));
+  }
+  return kv;
+}
+
+/// Split exiv2 output for several files (each line prefixed by the file name as it was passed)
+/// into per-file text, keyed by the index into `files`. Each line goes to the longest file name it
+/// starts with (followed by white space); other lines are dropped.
+inline std::vector<std::string> split_exiv2_output(std::string_view text, const std::vector<std::string>& files) {
+  std::vector<std::string> out(files.size());
+  std::size_t pos = 0;
+  while (pos < text.size()) {
+    std::size_t eol = text.find('\n', pos);
+    if (eol == std::string_view::npos) eol = text.size();
+    const std::string_view line = text.substr(pos, eol - pos);
+    pos = eol + 1;
+    std::size_t best = files.size(), best_len = 0;
+    for (std::size_t i = 0; i < files.size(); ++i) {
+      const std::string& f = files[i];
+      if (f.empty() || f.size() < best_len || line.size() <= f.size() || line.compare(0, f.size(), f) != 0 ||
+          !detail::is_space(line[f.size()]))
+        continue;
+      best = i;
+      best_len = f.size();
+    }
+    if (best == files.size()) continue;
+    out[best].append(line.substr(best_len));
+    out[best].push_back('\n');
+  }
+  return out;
+}
+
+/// Turn the key -> value map of one file into metadata. `file` names the image in errors.
+/// Throws IoError for a recognised key whose value is malformed (not a number where one is
+/// expected, a vignetting centre without two numbers, a non-positive exposure ...).
+inline CaptureMeta capture_meta_from_exiv2(const std::map<std::string, std::string>& kv,
+                                           const std::filesystem::path& file) {
+  CaptureMeta m;
+  auto first = [&](std::initializer_list<const char*> keys) -> const std::pair<const std::string, std::string>* {
+    for (const char* k : keys)
+      if (auto it = kv.find(k); it != kv.end()) return &*it;
+    return nullptr;
+  };
+  auto bad = [&](const std::pair<const std::string, std::string>& e, const char* expected) {
+    fail(file, e.first, cat("value '", e.second.substr(0, 80), "' is not ", expected,
+                            " (skip the metadata with --radiometry none)"));
+  };
+  auto number = [&](const std::pair<const std::string, std::string>& e, const char* expected, bool positive) {
+    // An exiv2 "interpreted" value may carry a unit ("5.5 mm"); -P kv gives plain values, but
+    // accept the first token either way.
+    auto list = detail::parse_number_list(e.second);
+    if (!list) {
+      const std::string_view v = detail::trim(e.second);
+      const std::size_t sp = v.find(' ');
+      if (sp != std::string_view::npos) list = detail::parse_number_list(v.substr(0, sp));
+    }
+    if (!list || (positive && !((*list)[0] > 0))) bad(e, expected);
+    return (*list)[0];
+  };
+  if (auto e = first({"Xmp.Camera.BandName"})) {
+    m.band_name = std::string(detail::trim(e->second));
+    m.source["band_name"] = e->first;
+  }
+  if (auto e = first({"Xmp.Camera.CentralWavelength"})) {
+    m.wavelength_nm = number(*e, "a wavelength in nm (> 0)", true);
+    m.source["wavelength_nm"] = e->first;
+  }
+  if (auto e = first({"Exif.Image.BlackLevel", "Xmp.drone-dji.BlackLevel", "Xmp.Camera.BlackLevel"})) {
+    const auto list = detail::parse_number_list(e->second);
+    if (!list) bad(*e, "a black level (one number, or one per CFA position)");
+    double s = 0;
+    for (double v : *list) s += v;
+    m.black_level = s / double(list->size());
+    if (*m.black_level < 0) bad(*e, "a non-negative black level");
+    m.source["black_level"] = e->first;
+  }
+  if (auto e = first({"Exif.Photo.ExposureTime", "Xmp.exif.ExposureTime"})) {
+    m.exposure_s = number(*e, "an exposure time in seconds (> 0, e.g. 1/1250)", true);
+    m.source["exposure_s"] = e->first;
+  }
+  if (auto e = first({"Xmp.drone-dji.SensorGain"})) {
+    m.gain = number(*e, "a gain factor (> 0)", true);
+    m.source["gain"] = e->first;
+  } else if (auto iso = first({"Exif.Photo.ISOSpeed", "Exif.Photo.ISOSpeedRatings", "Xmp.exifEX.ISOSpeed",
+                               "Xmp.exif.ISOSpeedRatings"})) {
+    m.gain = number(*iso, "an ISO value (> 0)", true) / 100.0;
+    m.source["gain"] = iso->first + " / 100";
+  }
+  if (auto e = first({"Xmp.Camera.VignettingPolynomial"})) {
+    const auto list = detail::parse_number_list(e->second, 16);
+    if (!list) bad(*e, "a list of up to 16 polynomial coefficients");
+    m.vignetting_poly = *list;
+    m.vignetting_kind = VignettingKind::falloff;
+    m.source["vignetting"] = e->first;
+    if (auto c = first({"Xmp.Camera.VignettingCenter"})) {
+      const auto cl = detail::parse_number_list(c->second, 2);
+      if (!cl || cl->size() != 2) bad(*c, "two numbers (x, y in pixels)");
+      m.vignetting_centre = std::array<double, 2>{(*cl)[0], (*cl)[1]};
+    }
+  } else if (auto d = first({"Xmp.drone-dji.VignettingData"})) {
+    const auto list = detail::parse_number_list(d->second, 16);
+    if (!list) bad(*d, "a list of up to 16 polynomial coefficients");
+    m.vignetting_poly = *list;
+    m.vignetting_kind = VignettingKind::correction;
+    m.source["vignetting"] = d->first;
+    const auto cx = first({"Xmp.drone-dji.CalibratedOpticalCenterX"});
+    const auto cy = first({"Xmp.drone-dji.CalibratedOpticalCenterY"});
+    if (cx && cy) m.vignetting_centre = std::array<double, 2>{number(*cx, "a pixel position", false),
+                                                              number(*cy, "a pixel position", false)};
+  }
+  if (auto e = first({"Exif.Photo.FocalLength", "Xmp.exif.FocalLength"})) {
+    m.focal_length_mm = number(*e, "a focal length in mm (> 0)", true);
+    m.source["focal_length_mm"] = e->first;
+  }
+  const bool exif_plane = kv.count("Exif.Photo.FocalPlaneXResolution") > 0;
+  if (auto e = first({"Exif.Photo.FocalPlaneXResolution", "Xmp.exif.FocalPlaneXResolution"})) {
+    const double res = number(*e, "a focal-plane resolution (> 0)", true);
+    double unit = 2;  // EXIF default: inch
+    if (auto u = first({exif_plane ? "Exif.Photo.FocalPlaneResolutionUnit" : "Xmp.exif.FocalPlaneResolutionUnit"})) {
+      unit = number(*u, "a resolution unit (2 inch, 3 cm, 4 mm, 5 micrometre)", true);
+      if (unit != 2 && unit != 3 && unit != 4 && unit != 5) bad(*u, "a resolution unit (2 inch, 3 cm, 4 mm, 5 micrometre)");
+    }
+    const double mm_per_unit = unit == 2 ? 25.4 : unit == 3 ? 10.0 : unit == 4 ? 1.0 : 0.001;
+    m.focal_plane_px_per_mm = res / mm_per_unit;
+    m.source["focal_plane_px_per_mm"] = e->first;
+  }
+  if (auto e = first({"Exif.Image.BitsPerSample"})) {
+    const double b = number(*e, "a bit depth (1..32)", true);
+    if (b != std::floor(b) || b > 32) bad(*e, "a bit depth (1..32)");
+    m.bits_per_sample = int(b);
+    m.source["bits_per_sample"] = e->first;
+  }
+  return m;
+}
+
+/// parse_exiv2_kv + capture_meta_from_exiv2.
+inline CaptureMeta parse_capture_meta(std::string_view exiv2_text, const std::filesystem::path& file) {
+  return capture_meta_from_exiv2(parse_exiv2_kv(exiv2_text), file);
+}
+
+}  // namespace msgs::io

@@ -1,0 +1,158 @@
+// include/msgs/io/radiometry.hpp
+// Radiometric normalisation of raw multi-band captures to relative radiance:
+//
+//   L(x, y) = (DN - black_level) / (exposure_s * gain * falloff(r)) * scale
+//
+// with DN in the file's digital numbers, falloff(r) the vignetting polynomial 1 + k0 r + k1 r^2 + ...
+// at the pixel's distance r from the vignetting centre (MicaSense convention; a DJI-style
+// correction polynomial enters as 1 / p(r)), and `scale` one common factor per band for the whole
+// capture set, chosen so that the brightest normalised value of the band is 1. Steps whose tags
+// are missing for some image of a band are left out for the whole band (mixing corrected and
+// uncorrected images would break the common scale); plan_band says which and why.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "msgs/image.hpp"
+#include "msgs/io/capture_meta.hpp"
+#include "msgs/io/error.hpp"
+
+namespace msgs::io {
+
+/// Which corrections are applied to a band.
+struct RadiometrySteps {
+  bool black_level = false, exposure = false, gain = false, vignetting = false;
+  bool any() const { return black_level || exposure || gain || vignetting; }
+};
+
+/// The normalisation of one image.
+struct FrameRadiometry {
+  RadiometrySteps steps;
+  double dn_max = 65535.0;  ///< digital number of a stored 1.0 (65535 for 16-bit, 255 for 8-bit)
+  double black_level = 0.0, exposure_s = 1.0, gain = 1.0;
+  std::vector<double> vignetting_poly;
+  double vignetting_cx = 0.0, vignetting_cy = 0.0;
+  VignettingKind vignetting_kind = VignettingKind::falloff;
+  double scale = 1.0;  ///< common factor of the band
+};
+
+/// What plan_band decided for a band, with the reasons.
+struct BandPlan {
+  RadiometrySteps steps;
+  /// Missing tag -> files lacking it (only for steps left out because of them).
+  std::map<std::string, std::vector<std::filesystem::path>> missing;
+};
+
+/// Decide which steps a band gets: a step is applied when every image of the band has its tags
+/// (black level; exposure time; gain or ISO; vignetting polynomial and centre).
+inline BandPlan plan_band(const std::vector<CaptureMeta>& metas, const std::vector<std::filesystem::path>& files) {
+  BandPlan plan;
+  auto check = [&](const char* tag, auto&& has) {
+    std::vector<std::filesystem::path> lacking;
+    for (std::size_t i = 0; i < metas.size(); ++i)
+      if (!has(metas[i])) lacking.push_back(i < files.size() ? files[i] : std::filesystem::path());
+    if (!lacking.empty()) plan.missing[tag] = std::move(lacking);
+    return plan.missing.count(tag) == 0 && !metas.empty();
+  };
+  plan.steps.black_level = check("black level", [](const CaptureMeta& m) { return m.black_level.has_value(); });
+  plan.steps.exposure = check("exposure time", [](const CaptureMeta& m) { return m.exposure_s.has_value(); });
+  plan.steps.gain = check("gain/ISO", [](const CaptureMeta& m) { return m.gain.has_value(); });
+  plan.steps.vignetting = check("vignetting polynomial+centre", [](const CaptureMeta& m) { return m.has_vignetting(); });
+  return plan;
+}
+
+/// The normalisation of one image under `steps` (scale 1; set it once the band's maximum is known).
+inline FrameRadiometry frame_radiometry(const CaptureMeta& m, const RadiometrySteps& steps, double dn_max) {
+  FrameRadiometry r;
+  r.steps = steps;
+  r.dn_max = dn_max;
+  if (steps.black_level) r.black_level = *m.black_level;
+  if (steps.exposure) r.exposure_s = *m.exposure_s;
+  if (steps.gain) r.gain = *m.gain;
+  if (steps.vignetting) {
+    r.vignetting_poly = m.vignetting_poly;
+    r.vignetting_cx = (*m.vignetting_centre)[0];
+    r.vignetting_cy = (*m.vignetting_centre)[1];
+    r.vignetting_kind = m.vignetting_kind;
+  }
+  return r;
+}
+
+/// 1 + k0 r + k1 r^2 + ... (Horner).
+inline double vignetting_polynomial(const std::vector<double>& k, double r) {
+  double acc = 0.0;
+  for (std::size_t i = k.size(); i-- > 0;) acc = (acc + k[i]) * r;
+  return 1.0 + acc;
+}
+
+/// How much darker the sensor records pixel (x, y) (0-based pixel indices, as MicaSense and DJI
+/// define r) than the centre: DN is proportional to radiance x vignetting_falloff. 1 without vignetting.
+inline double vignetting_falloff(const FrameRadiometry& r, double x, double y) {
+  if (!r.steps.vignetting || r.vignetting_poly.empty()) return 1.0;
+  const double p = vignetting_polynomial(r.vignetting_poly, std::hypot(x - r.vignetting_cx, y - r.vignetting_cy));
+  return r.vignetting_kind == VignettingKind::falloff ? p : 1.0 / p;
+}
+
+/// Relative radiance of digital number `dn` at pixel (x, y), before the band scale.
+inline double relative_radiance(double dn, double x, double y, const FrameRadiometry& r) {
+  return (dn - r.black_level) / (r.exposure_s * r.gain * vignetting_falloff(r, x, y));
+}
+
+/// Check the parameters (finite, positive exposure and gain, a vignetting model that stays
+/// positive over the image); IoError naming `file` otherwise.
+inline void check_radiometry(const FrameRadiometry& r, int width, int height, const std::filesystem::path& file) {
+  if (!(r.dn_max > 0) || !std::isfinite(r.black_level) || !(r.exposure_s > 0) || !(r.gain > 0) ||
+      !std::isfinite(r.exposure_s * r.gain) || !(r.scale > 0) || !std::isfinite(r.scale))
+    fail(file, cat("radiometric parameters out of range (black level ", r.black_level, ", exposure ", r.exposure_s,
+                   " s, gain ", r.gain, ", scale ", r.scale, ")"));
+  if (r.steps.vignetting) {
+    // The polynomial in r is checked at the centre's nearest and farthest image points and in between.
+    const double xs[] = {0.0, double(width - 1)}, ys[] = {0.0, double(height - 1)};
+    double rmax = 0.0;
+    for (double x : xs)
+      for (double y : ys) rmax = std::max(rmax, std::hypot(x - r.vignetting_cx, y - r.vignetting_cy));
+    for (int i = 0; i <= 64; ++i) {
+      const double rr = rmax * i / 64.0;
+      const double p = vignetting_polynomial(r.vignetting_poly, rr);
+      if (!(p > 1e-3) || !std::isfinite(p))
+        fail(file, cat("vignetting polynomial is ", p, " at ", rr, " px from its centre (expected > 0 over the image;",
+                       " skip the metadata with --radiometry none)"));
+    }
+  }
+}
+
+/// Normalise an image read as [0, 1] (stored value x dn_max = DN), single channel or not: every
+/// channel gets the same correction. Negative results (noise below the black level) become 0;
+/// values are not clamped above, so the caller can find the band's maximum with scale = 1.
+inline Image<float> normalise_image(const Image<float>& raw, const FrameRadiometry& r, const std::filesystem::path& file) {
+  check_radiometry(r, raw.width, raw.height, file);
+  Image<float> out(raw.width, raw.height, raw.channels);
+  for (int y = 0; y < raw.height; ++y)
+    for (int x = 0; x < raw.width; ++x) {
+      const double k = r.scale / (r.exposure_s * r.gain * vignetting_falloff(r, x, y));
+      for (int c = 0; c < raw.channels; ++c) {
+        const double dn = double(raw.at(x, y, c)) * r.dn_max;
+        out.at(x, y, c) = float(std::max(0.0, (dn - r.black_level) * k));
+      }
+    }
+  return out;
+}
+
+/// Largest value of an image (0 for an empty one).
+inline float max_value(const Image<float>& img) {
+  float m = 0.0f;
+  for (float v : img.data) m = std::max(m, v);
+  return m;
+}
+
+/// The band scale: 1 / the largest relative radiance over all images of the band (1 when that is 0).
+inline double band_scale(double max_relative_radiance) {
+  return max_relative_radiance > 0 && std::isfinite(max_relative_radiance) ? 1.0 / max_relative_radiance : 1.0;
+}
+
+}  // namespace msgs::io

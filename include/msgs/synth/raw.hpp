@@ -1,0 +1,393 @@
+// include/msgs/synth/raw.hpp
+// The synthetic scene as a folder of raw multi-band captures, the way a real multispectral camera
+// writes them (offline test data for `msgs import`): the camera's file names, 16-bit TIFFs whose
+// digital numbers carry per-capture exposure differences, vignetting and a black level,
+//
+//   DN = black_level + radiance * exposure_s * gain * falloff(r) * sensitivity, clamped to 0..65535,
+//
+// and the metadata that real camera writes, as an XMP packet in TIFF tag 700 (readable by exiv2).
+//
+//   micasense  IMG_0001_1.tif .. IMG_0001_5.tif (1 Blue, 2 Green, 3 Red, 4 NIR, 5 RedEdge); no RGB
+//              camera. XMP: Camera:BandName, Camera:CentralWavelength, Camera:WavelengthFWHM,
+//              Camera:VignettingCenter, Camera:VignettingPolynomial (fall-off 1 + k0 r + ... in
+//              pixels), Camera:BlackLevel, exif:ExposureTime, exif:ISOSpeedRatings, exif:FocalLength,
+//              exif:FocalPlaneXResolution/YResolution/ResolutionUnit (4 = mm). Real MicaSense files
+//              keep exposure, ISO, focal length and black level in EXIF IFDs instead; the importer
+//              reads both places.
+//   dji        DJI_<datetime>_0001_MS_G.TIF, _MS_R, _MS_RE, _MS_NIR, and _D.JPG (8-bit sRGB). XMP:
+//              Camera:BandName, Camera:CentralWavelength, drone-dji:BlackLevel,
+//              drone-dji:SensorGain, drone-dji:VignettingData (a correction polynomial that
+//              multiplies the image), drone-dji:CalibratedOpticalCenterX/Y, exif:ExposureTime,
+//              exif:FocalLength, exif:FocalPlane*.
+//   sequoia    IMG_<yymmdd>_<hhmmss>_0001_GRE.TIF, _RED, _REG, _NIR, and _RGB.JPG. Like the real
+//              camera: no black level (DN = radiance x ...) and no MicaSense-style vignetting tags
+//              (the real one writes a 2-D polynomial msgs does not read), so the images carry no
+//              vignetting either; exposure, ISO, wavelengths and focal data as for MicaSense.
+//
+// Exposure time and ISO vary per capture and band (an auto-exposing camera), seeded: the same
+// seed gives the same bytes.
+#pragma once
+
+#include <stb/stb_image_write.h>
+
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <filesystem>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "../io/error.hpp"
+#include "../io/file.hpp"
+#include "../io/image_io.hpp"
+#include "dataset.hpp"
+#include "render.hpp"
+#include "scene.hpp"
+
+namespace msgs::synth {
+
+/// What to generate.
+struct RawOptions {
+  std::string camera = "micasense";  ///< micasense | dji | sequoia
+  std::string preset = "tiny";       ///< scene, flight and image sizes (see synth_presets)
+  std::uint64_t seed = 1;
+  int captures = 0;   ///< number of captures (0: the preset's)
+  int width = 0;      ///< multispectral image width (0: the preset's); height 3/4 of it, RGB 1.5x
+  bool overwrite = false;
+};
+
+/// What was generated.
+struct RawSummary {
+  std::filesystem::path out;
+  std::string camera;
+  int captures = 0;
+  int files = 0;
+  int ms_width = 0, ms_height = 0, rgb_width = 0, rgb_height = 0;
+  double min_exposure_s = 0, max_exposure_s = 0;
+  int min_iso = 0, max_iso = 0;
+  double seconds = 0;
+};
+
+/// One band of a raw camera.
+struct RawBand {
+  const char* name_part;   ///< file-name part ("1", "MS_G", "GRE")
+  const char* band_name;   ///< Camera:BandName
+  double wavelength_nm, fwhm_nm;
+  int spectrum_channel;    ///< Spectrum index rendered (0..2 linear RGB, 3..6 the narrow bands)
+  Band mount;              ///< whose rig position and boresight the lens takes
+  bool rgb;                ///< the 8-bit RGB JPEG camera
+  double sensitivity;      ///< DN per unit radiance x second x gain
+};
+
+/// The bands of a raw camera, in file order.
+inline std::vector<RawBand> raw_bands(std::string_view camera) {
+  if (camera == "micasense")
+    return {{"1", "Blue", 475, 32, 2, Band::D, false, 1.10e7},
+            {"2", "Green", 560, 27, 3, Band::MS_G, false, 1.00e7},
+            {"3", "Red", 668, 14, 4, Band::MS_R, false, 1.20e7},
+            {"4", "NIR", 840, 57, 6, Band::MS_NIR, false, 0.80e7},
+            {"5", "RedEdge", 717, 12, 5, Band::MS_RE, false, 0.95e7}};
+  if (camera == "dji")
+    return {{"D", "RGB", 0, 0, 0, Band::D, true, 0},
+            {"MS_G", "Green", 560, 16, 3, Band::MS_G, false, 1.00e7},
+            {"MS_R", "Red", 650, 16, 4, Band::MS_R, false, 1.15e7},
+            {"MS_RE", "RedEdge", 730, 16, 5, Band::MS_RE, false, 0.90e7},
+            {"MS_NIR", "NIR", 860, 26, 6, Band::MS_NIR, false, 0.80e7}};
+  if (camera == "sequoia")
+    return {{"GRE", "Green", 550, 40, 3, Band::MS_G, false, 1.00e7},
+            {"RED", "Red", 660, 40, 4, Band::MS_R, false, 1.10e7},
+            {"REG", "Red edge", 735, 10, 5, Band::MS_RE, false, 0.90e7},
+            {"NIR", "NIR", 790, 40, 6, Band::MS_NIR, false, 0.85e7},
+            {"RGB", "RGB", 0, 0, 0, Band::D, true, 0}};
+  throw std::invalid_argument("unknown raw camera '" + std::string(camera) + "' (expected micasense, dji or sequoia)");
+}
+
+/// File name of band `b` of capture `capture` (0-based) as `camera` names it.
+inline std::string raw_file_name(std::string_view camera, const RawBand& b, int capture) {
+  char buf[96];
+  const int n = capture + 1;
+  const int secs = 10 * 3600 + 2 * capture;  // 10:00:00, one capture every 2 s
+  const int hh = secs / 3600, mm = secs / 60 % 60, ss = secs % 60;
+  if (camera == "micasense") std::snprintf(buf, sizeof buf, "IMG_%04d_%s.tif", n, b.name_part);
+  else if (camera == "dji")
+    std::snprintf(buf, sizeof buf, "DJI_20240601%02d%02d%02d_%04d_%s.%s", hh, mm, ss, n, b.name_part, b.rgb ? "JPG" : "TIF");
+  else std::snprintf(buf, sizeof buf, "IMG_240601_%02d%02d%02d_%04d_%s.%s", hh, mm, ss, n, b.name_part, b.rgb ? "JPG" : "TIF");
+  return buf;
+}
+
+/// Exposure of one image.
+struct RawExposure {
+  double exposure_s;
+  int iso;
+  double gain() const { return iso / 100.0; }
+};
+
+/// Auto-exposure of band `band` in capture `capture`: 1/2000 .. 1/500 s, ISO 100 / 200 / 400 (400 rare).
+inline RawExposure raw_exposure(std::uint64_t seed, int capture, int band) {
+  Rng rng(hash_tuple(seed, 0xE7905EULL, capture, band));
+  RawExposure e;
+  e.exposure_s = 0.0005 * std::pow(4.0, rng.uniform());
+  const double u = rng.uniform();
+  e.iso = u < 0.55 ? 100 : u < 0.9 ? 200 : 400;
+  e.exposure_s = std::round(1.0 / e.exposure_s) > 0 ? 1.0 / std::round(1.0 / e.exposure_s) : e.exposure_s;  // 1/N s
+  return e;
+}
+
+namespace detail {
+
+/// Linear radiance of one Spectrum channel, traced like render_band (same jitter pattern), not clamped.
+inline Image<float> render_radiance(const SynthScene& s, const Camera<float>& cam, int channel, const RenderSettings& rs) {
+  cam.validate();
+  const int aa = std::max(1, rs.aa);
+  Image<float> img(cam.width, cam.height, 1);
+  const float inv = 1.f / float(aa * aa);
+#pragma omp parallel for schedule(dynamic, 1)
+  for (int y = 0; y < cam.height; ++y)
+    for (int x = 0; x < cam.width; ++x) {
+      float acc = 0.f;
+      for (int sy = 0; sy < aa; ++sy)
+        for (int sx = 0; sx < aa; ++sx) {
+          const std::uint64_t h = hash_tuple(rs.jitter_seed, x, y, sx, sy);
+          const float jx = (float(sx) + hash_to_unit(h)) / float(aa);
+          const float jy = (float(sy) + hash_to_unit(splitmix64(h))) / float(aa);
+          const Ray ray = camera_ray(cam, float(x) + jx, float(y) + jy);
+          acc += shade(s, ray, trace(s, ray))[static_cast<std::size_t>(channel)];
+        }
+      img.at(x, y, 0) = acc * inv;
+    }
+  return img;
+}
+
+inline std::string g10(double v) {
+  char buf[40];
+  std::snprintf(buf, sizeof buf, "%.10g", v);
+  return buf;
+}
+
+inline std::string rdf_seq(const std::vector<double>& v) {
+  std::string s = "<rdf:Seq>";
+  for (double x : v) s += "<rdf:li>" + g10(x) + "</rdf:li>";
+  return s + "</rdf:Seq>";
+}
+
+/// XMP packet: simple properties as attributes, sequences as elements.
+inline std::string xmp_packet(const std::vector<std::pair<std::string, std::string>>& attrs,
+                              const std::vector<std::pair<std::string, std::string>>& elems) {
+  std::string s =
+      "<?xpacket begin=\"\xEF\xBB\xBF\" id=\"W5M0MpCehiHzreSzNTczkc9d\"?>\n"
+      "<x:xmpmeta xmlns:x=\"adobe:ns:meta/\">\n"
+      " <rdf:RDF xmlns:rdf=\"http://www.w3.org/1999/02/22-rdf-syntax-ns#\">\n"
+      "  <rdf:Description rdf:about=\"\"\n"
+      "    xmlns:Camera=\"http://pix4d.com/camera/1.0/\"\n"
+      "    xmlns:exif=\"http://ns.adobe.com/exif/1.0/\"\n"
+      "    xmlns:tiff=\"http://ns.adobe.com/tiff/1.0/\"\n"
+      "    xmlns:drone-dji=\"http://www.dji.com/drone-dji/1.0/\"";
+  for (const auto& [k, v] : attrs) s += "\n    " + k + "=\"" + v + "\"";
+  s += ">\n";
+  for (const auto& [k, v] : elems) s += "   <" + k + ">" + v + "</" + k + ">\n";
+  s += "  </rdf:Description>\n </rdf:RDF>\n</x:xmpmeta>\n<?xpacket end=\"w\"?>";
+  return s;
+}
+
+/// 16-bit greyscale TIFF of digital numbers with an XMP packet (tag 700). Atomic.
+inline void write_raw_tiff(const std::filesystem::path& p, int w, int h, const std::vector<std::uint16_t>& dn,
+                           const std::string& xmp) {
+  io::AtomicFile out(p);
+  {
+    io::detail::TiffFile tf(out.temp(), "w");
+    TIFF* tif = tf.get();
+    if (!tif) io::fail(p, io::cat("cannot open for writing: ", tf.error()));
+    TIFFSetField(tif, TIFFTAG_IMAGEWIDTH, std::uint32_t(w));
+    TIFFSetField(tif, TIFFTAG_IMAGELENGTH, std::uint32_t(h));
+    TIFFSetField(tif, TIFFTAG_BITSPERSAMPLE, std::uint16_t(16));
+    TIFFSetField(tif, TIFFTAG_SAMPLESPERPIXEL, std::uint16_t(1));
+    TIFFSetField(tif, TIFFTAG_SAMPLEFORMAT, std::uint16_t(SAMPLEFORMAT_UINT));
+    TIFFSetField(tif, TIFFTAG_PLANARCONFIG, std::uint16_t(PLANARCONFIG_CONTIG));
+    TIFFSetField(tif, TIFFTAG_PHOTOMETRIC, std::uint16_t(PHOTOMETRIC_MINISBLACK));
+    TIFFSetField(tif, TIFFTAG_ROWSPERSTRIP, std::uint32_t(h));
+    TIFFSetField(tif, TIFFTAG_XMLPACKET, std::uint32_t(xmp.size()), xmp.data());
+    std::vector<std::uint16_t> line(static_cast<std::size_t>(w));
+    for (int y = 0; y < h; ++y) {
+      std::copy(dn.begin() + std::ptrdiff_t(y) * w, dn.begin() + std::ptrdiff_t(y + 1) * w, line.begin());
+      if (TIFFWriteScanline(tif, line.data(), std::uint32_t(y), 0) < 0) io::fail(p, io::cat("cannot write TIFF row: ", tf.error()));
+    }
+    if (!tf.close()) io::fail(p, io::cat("cannot finish TIFF: ", tf.error()));
+  }
+  out.commit();
+}
+
+inline void append_bytes(void* ctx, void* data, int size) {
+  auto* v = static_cast<std::vector<unsigned char>*>(ctx);
+  const auto* b = static_cast<const unsigned char*>(data);
+  v->insert(v->end(), b, b + size);
+}
+
+/// 8-bit sRGB JPEG (quality 95) with the XMP packet in an APP1 segment right after SOI. Atomic.
+inline void write_rgb_jpeg(const std::filesystem::path& p, const Image<float>& srgb, const std::string& xmp) {
+  std::vector<unsigned char> px(srgb.data.size());
+  for (std::size_t i = 0; i < px.size(); ++i)
+    px[i] = static_cast<unsigned char>(std::lround(std::clamp(srgb.data[i], 0.f, 1.f) * 255.f));
+  std::vector<unsigned char> jpg;
+  if (!stbi_write_jpg_to_func(append_bytes, &jpg, srgb.width, srgb.height, 3, px.data(), 95) || jpg.size() < 4)
+    io::fail(p, "JPEG encoding failed");
+  static constexpr char ns[] = "http://ns.adobe.com/xap/1.0/";  // with its terminating NUL
+  const std::size_t len = 2 + sizeof ns + xmp.size();
+  if (len > 65535) io::fail(p, "XMP packet too large for one APP1 segment");
+  std::vector<unsigned char> app1 = {0xFF, 0xE1, static_cast<unsigned char>(len >> 8), static_cast<unsigned char>(len & 0xFF)};
+  app1.insert(app1.end(), ns, ns + sizeof ns);
+  app1.insert(app1.end(), xmp.begin(), xmp.end());
+  jpg.insert(jpg.begin() + 2, app1.begin(), app1.end());
+  io::write_bytes_atomic(p, jpg.data(), jpg.size());
+}
+
+}  // namespace detail
+
+/// Render the scene of `opt.preset` / `opt.seed` as raw captures of `opt.camera` into `out`
+/// (written into a hidden sibling first, renamed into place at the end; an existing `out` is an
+/// error unless `opt.overwrite`). Throws std::invalid_argument for a bad camera, preset or size,
+/// io::IoError for I/O errors.
+inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, const RawOptions& opt) {
+  namespace fs = std::filesystem;
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::vector<RawBand> bands = raw_bands(opt.camera);
+  SynthPreset preset = synth_preset(opt.preset);
+  if (opt.captures < 0 || opt.captures > 100000) throw std::invalid_argument("captures must be 0 (preset) .. 100000");
+  if (opt.width != 0 && (opt.width < 16 || opt.width > 8192)) throw std::invalid_argument("width must be 0 (preset) or 16 .. 8192");
+  if (opt.captures > 0) preset.captures = opt.captures;
+  if (opt.width > 0) {
+    preset.ms_width = opt.width;
+    preset.ms_height = opt.width * 3 / 4;
+    preset.rgb_width = opt.width * 3 / 2;
+    preset.rgb_height = preset.ms_height * 3 / 2;
+  }
+  fs::path out = fs::absolute(out_arg).lexically_normal();
+  if (out.filename().empty()) out = out.parent_path();
+  std::error_code ec;
+  if (fs::exists(out, ec) && !opt.overwrite)
+    io::fail(out, "output directory already exists (choose another one, or overwrite: --force)");
+  fs::create_directories(out.parent_path(), ec);
+  if (ec) io::fail(out.parent_path(), io::cat("cannot create parent directory: ", ec.message()));
+  const fs::path tmp = detail::sibling(out, ".raw-tmp-", opt.seed);
+  fs::create_directories(tmp, ec);
+  if (ec) io::fail(tmp, io::cat("cannot create temporary output directory: ", ec.message()));
+  detail::TreeGuard guard{tmp};
+
+  const SynthScene scene = make_scene(preset, opt.seed);
+  RawSummary sum;
+  sum.out = out;
+  sum.camera = opt.camera;
+  sum.captures = int(scene.captures.size());
+  sum.ms_width = preset.ms_width;
+  sum.ms_height = preset.ms_height;
+  sum.rgb_width = preset.rgb_width;
+  sum.rgb_height = preset.rgb_height;
+  sum.min_exposure_s = 1e9;
+  sum.min_iso = 1 << 30;
+  const bool black = opt.camera != "sequoia", vignette = opt.camera != "sequoia";
+  const double black_level = opt.camera == "dji" ? 3200.0 : 4800.0;
+  for (int ci = 0; ci < sum.captures; ++ci) {
+    const Capture& cap = scene.captures[static_cast<std::size_t>(ci)];
+    for (std::size_t bi = 0; bi < bands.size(); ++bi) {
+      const RawBand& b = bands[bi];
+      Camera<float> cam = cap.cameras[static_cast<std::size_t>(b.mount)];
+      if (!b.rgb && b.mount == Band::D) {  // MicaSense blue: an MS lens where the RGB lens would be
+        const Camera<float> ms = rig_intrinsics(Band::MS_G, preset);
+        cam.fx = ms.fx; cam.fy = ms.fy; cam.cx = ms.cx; cam.cy = ms.cy; cam.width = ms.width; cam.height = ms.height;
+      }
+      // Nominal lens data as the camera reports it (the real focal length differs by ~1 %).
+      const double hfov = rig_mount(b.mount == Band::D && !b.rgb ? Band::MS_G : b.mount).hfov_deg;
+      const double nominal_fx = 0.5 * cam.width / std::tan(0.5 * hfov * 3.14159265358979323846 / 180.0);
+      const double focal_mm = b.rgb ? 12.29 : 5.5;
+      const double px_per_mm = nominal_fx / focal_mm;
+      RenderSettings rs;
+      rs.aa = preset.aa;
+      rs.jitter_seed = frame_jitter_seed(opt.seed, ci, b.mount) ^ (bi * 0x9E3779B97F4A7C15ULL);
+      const fs::path file = tmp / raw_file_name(opt.camera, b, ci);
+      std::vector<std::pair<std::string, std::string>> attrs = {
+          {"Camera:BandName", b.band_name},
+          {"exif:FocalLength", detail::g10(focal_mm)},
+          {"exif:FocalPlaneXResolution", detail::g10(px_per_mm)},
+          {"exif:FocalPlaneYResolution", detail::g10(px_per_mm)},
+          {"exif:FocalPlaneResolutionUnit", "4"}};
+      std::vector<std::pair<std::string, std::string>> elems;
+      if (b.rgb) {
+        const Image<float> img = render_band(scene, cam, Band::D, rs);
+        detail::write_rgb_jpeg(file, img, detail::xmp_packet(attrs, elems));
+        ++sum.files;
+        continue;
+      }
+      const RawExposure e = raw_exposure(opt.seed, ci, int(bi));
+      sum.min_exposure_s = std::min(sum.min_exposure_s, e.exposure_s);
+      sum.max_exposure_s = std::max(sum.max_exposure_s, e.exposure_s);
+      sum.min_iso = std::min(sum.min_iso, e.iso);
+      sum.max_iso = std::max(sum.max_iso, e.iso);
+      // Vignetting: fall-off to ~0.72 in the corners, centre a few pixels off the image centre.
+      const double vcx = 0.5 * cam.width - 0.5 + 0.02 * cam.width, vcy = 0.5 * cam.height - 0.5 - 0.015 * cam.height;
+      const double rmax = std::hypot(0.5 * cam.width, 0.5 * cam.height);
+      // falloff(r) = 1 - 0.30 rho^2 + 0.02 rho^4 (rho = r / rmax); DJI's correction is 1 + 0.3 rho^2 + 0.07 rho^4,
+      // whose inverse is the fall-off the sensor sees.
+      const std::vector<double> k = opt.camera == "dji"
+                                        ? std::vector<double>{0, 0.30 / (rmax * rmax), 0, 0.07 / std::pow(rmax, 4), 0, 0}
+                                        : std::vector<double>{0, -0.30 / (rmax * rmax), 0, 0.02 / std::pow(rmax, 4), 0, 0};
+      const Image<float> L = detail::render_radiance(scene, cam, b.spectrum_channel, rs);
+      std::vector<std::uint16_t> dn(L.data.size());
+      const double bl = black ? black_level : 0.0;
+      for (int y = 0; y < cam.height; ++y)
+        for (int x = 0; x < cam.width; ++x) {
+          double fall = 1.0;
+          if (vignette) {
+            double p = 0.0;
+            const double r = std::hypot(x - vcx, y - vcy);
+            for (std::size_t i = k.size(); i-- > 0;) p = (p + k[i]) * r;
+            fall = opt.camera == "dji" ? 1.0 / (1.0 + p) : 1.0 + p;
+          }
+          const double v = bl + double(L.at(x, y, 0)) * e.exposure_s * e.gain() * fall * b.sensitivity;
+          dn[std::size_t(y) * std::size_t(cam.width) + std::size_t(x)] =
+              static_cast<std::uint16_t>(std::lround(std::clamp(v, 0.0, 65535.0)));
+        }
+      attrs.emplace_back("Camera:CentralWavelength", detail::g10(b.wavelength_nm));
+      attrs.emplace_back("Camera:WavelengthFWHM", detail::g10(b.fwhm_nm));
+      attrs.emplace_back("exif:ExposureTime", io::cat("1/", std::lround(1.0 / e.exposure_s)));
+      if (opt.camera == "dji") {
+        attrs.emplace_back("drone-dji:BlackLevel", detail::g10(black_level));
+        attrs.emplace_back("drone-dji:SensorGain", detail::g10(e.gain()));
+        std::string kv;
+        for (std::size_t i = 0; i < k.size(); ++i) kv += (i ? "," : "") + detail::g10(k[i]);
+        attrs.emplace_back("drone-dji:VignettingData", kv);
+        attrs.emplace_back("drone-dji:CalibratedOpticalCenterX", detail::g10(vcx));
+        attrs.emplace_back("drone-dji:CalibratedOpticalCenterY", detail::g10(vcy));
+      } else {
+        elems.emplace_back("exif:ISOSpeedRatings", detail::rdf_seq({double(e.iso)}));
+        if (black) attrs.emplace_back("Camera:BlackLevel", detail::g10(black_level));
+        if (vignette) {
+          elems.emplace_back("Camera:VignettingCenter", detail::rdf_seq({vcx, vcy}));
+          elems.emplace_back("Camera:VignettingPolynomial", detail::rdf_seq(k));
+        }
+      }
+      detail::write_raw_tiff(file, cam.width, cam.height, dn, detail::xmp_packet(attrs, elems));
+      ++sum.files;
+    }
+  }
+  fs::path old;
+  if (fs::exists(out, ec)) {
+    old = detail::sibling(out, ".raw-old-", opt.seed + 1);
+    fs::rename(out, old, ec);
+    if (ec) io::fail(out, io::cat("cannot move the existing directory aside: ", ec.message()));
+  }
+  fs::rename(tmp, out, ec);
+  if (ec) {
+    std::error_code ec2;
+    if (!old.empty()) fs::rename(old, out, ec2);
+    io::fail(out, io::cat("cannot rename the finished folder into place: ", ec.message()));
+  }
+  guard.armed = false;
+  if (!old.empty()) fs::remove_all(old, ec);
+  sum.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return sum;
+}
+
+}  // namespace msgs::synth

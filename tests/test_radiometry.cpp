@@ -1,0 +1,187 @@
+// tests/test_radiometry.cpp
+// Tests for include/msgs/io/capture_meta.hpp (exiv2 output -> metadata) and
+// include/msgs/io/radiometry.hpp (DN -> relative radiance): known values, vignetting conventions,
+// band planning with missing tags, and clear errors for malformed text instead of crashes.
+#include <doctest/doctest.h>
+
+#include <msgs/io/capture_meta.hpp>
+#include <msgs/io/radiometry.hpp>
+
+#include <cmath>
+#include <string>
+#include <vector>
+
+using namespace msgs::io;
+
+namespace {
+
+// What `exiv2 -q -P kv -K ...` prints for a synthetic MicaSense band (and real files' EXIF keys).
+const char* kMicaSense =
+    "Exif.Image.BitsPerSample                      16\n"
+    "Xmp.Camera.BandName                           Green\n"
+    "Xmp.Camera.CentralWavelength                  560\n"
+    "Xmp.Camera.BlackLevel                         4800\n"
+    "Xmp.Camera.VignettingCenter                   82.7, 57.7\n"
+    "Xmp.Camera.VignettingPolynomial               0, -3e-05, 0, 2e-10, 0, 0\n"
+    "Xmp.exif.FocalLength                          5.5\n"
+    "Xmp.exif.FocalPlaneXResolution                24.2\n"
+    "Xmp.exif.FocalPlaneResolutionUnit             4\n"
+    "Xmp.exif.ExposureTime                         1/1246\n"
+    "Xmp.exif.ISOSpeedRatings                      200\n";
+
+}  // namespace
+
+TEST_CASE("capture meta: MicaSense-style XMP as exiv2 prints it") {
+  const CaptureMeta m = parse_capture_meta(kMicaSense, "IMG_0001_2.tif");
+  CHECK(*m.band_name == "Green");
+  CHECK(*m.wavelength_nm == 560);
+  CHECK(*m.black_level == 4800);
+  CHECK(*m.exposure_s == doctest::Approx(1.0 / 1246));
+  CHECK(*m.gain == doctest::Approx(2.0));
+  CHECK(m.source.at("gain") == "Xmp.exif.ISOSpeedRatings / 100");
+  REQUIRE(m.has_vignetting());
+  CHECK(m.vignetting_kind == VignettingKind::falloff);
+  CHECK(m.vignetting_poly.size() == 6);
+  CHECK((*m.vignetting_centre)[1] == doctest::Approx(57.7));
+  CHECK(*m.focal_px() == doctest::Approx(5.5 * 24.2));
+  CHECK(*m.bits_per_sample == 16);
+}
+
+TEST_CASE("capture meta: real EXIF keys, DJI keys, units and precedence") {
+  const char* exif =
+      "Exif.Image.BlackLevel                         4800 4800 4800 4802\n"
+      "Exif.Photo.ExposureTime                       1/500\n"
+      "Exif.Photo.ISOSpeed                           100\n"
+      "Exif.Photo.FocalLength                        11/2\n"
+      "Exif.Photo.FocalPlaneXResolution              6773.3\n"  // pixels per inch: unit defaults to 2
+      "Xmp.exif.ExposureTime                         1/100\n";   // the EXIF value wins
+  const CaptureMeta a = parse_capture_meta(exif, "a.tif");
+  CHECK(*a.black_level == doctest::Approx(4800.5));
+  CHECK(*a.exposure_s == doctest::Approx(0.002));
+  CHECK(*a.gain == doctest::Approx(1.0));
+  CHECK(*a.focal_plane_px_per_mm == doctest::Approx(6773.3 / 25.4));
+  CHECK(!a.has_vignetting());
+
+  const char* dji =
+      "Xmp.drone-dji.BlackLevel                      3200\n"
+      "Xmp.drone-dji.SensorGain                      1.5\n"
+      "Xmp.exif.ISOSpeedRatings                      400\n"  // SensorGain wins over ISO
+      "Xmp.drone-dji.VignettingData                  0,1.2e-05,0,3e-11,0,0\n"
+      "Xmp.drone-dji.CalibratedOpticalCenterX        83.2\n"
+      "Xmp.drone-dji.CalibratedOpticalCenterY        58.2\n";
+  const CaptureMeta d = parse_capture_meta(dji, "DJI_x_MS_G.TIF");
+  CHECK(*d.gain == 1.5);
+  CHECK(d.vignetting_kind == VignettingKind::correction);
+  CHECK(d.has_vignetting());
+  CHECK(!d.exposure_s);
+}
+
+TEST_CASE("capture meta: several files in one exiv2 output, junk lines ignored") {
+  const std::vector<std::string> files = {"/d/a b.tif", "/d/a b.tif.2", "/d/c.tif"};
+  const std::string text =
+      "/d/a b.tif   Xmp.Camera.BandName   Red\n"
+      "/d/a b.tif.2 Xmp.Camera.BandName   NIR\n"
+      "Warning: Directory Image, entry 0x8769 has unknown Exif (TIFF) type 0; setting type size 1.\n"
+      "/d/c.tif     Xmp.exif.ExposureTime 1/1000\n"
+      "/d/c.tifX    Xmp.exif.ExposureTime 1/3\n"
+      "\n\n\t\r\n";
+  const auto per = split_exiv2_output(text, files);
+  REQUIRE(per.size() == 3);
+  CHECK(*parse_capture_meta(per[0], files[0]).band_name == "Red");
+  CHECK(*parse_capture_meta(per[1], files[1]).band_name == "NIR");
+  CHECK(*parse_capture_meta(per[2], files[2]).exposure_s == doctest::Approx(0.001));
+  // Lines that are not KEY VALUE (continuations of multi-line values, binary junk) are skipped.
+  const auto kv = parse_exiv2_kv("garbage line\nXmp.a\n\x01\x02\xff Xmp.Camera.BandName x\nXmp.Camera.BandName  Blue  \n");
+  CHECK(kv.size() == 1);
+  CHECK(kv.at("Xmp.Camera.BandName") == "Blue");
+  CHECK(parse_capture_meta("", "empty.tif").source.empty());
+}
+
+TEST_CASE("capture meta: malformed values give errors naming the file and the key") {
+  auto bad = [](const std::string& text) { return parse_capture_meta(text, "IMG_0001_2.tif"); };
+  CHECK_THROWS_WITH_AS(bad("Xmp.exif.ExposureTime  1/0\n"), doctest::Contains("IMG_0001_2.tif: field 'Xmp.exif.ExposureTime'"), IoError);
+  CHECK_THROWS_WITH_AS(bad("Xmp.exif.ExposureTime  -0.001\n"), doctest::Contains("exposure time"), IoError);
+  CHECK_THROWS_WITH_AS(bad("Exif.Photo.ISOSpeed  fast\n"), doctest::Contains("an ISO value"), IoError);
+  CHECK_THROWS_WITH_AS(bad("Xmp.Camera.BlackLevel  nan\n"), doctest::Contains("black level"), IoError);
+  CHECK_THROWS_WITH_AS(bad("Xmp.Camera.BlackLevel  1e999\n"), doctest::Contains("black level"), IoError);
+  CHECK_THROWS_WITH_AS(bad("Xmp.Camera.VignettingPolynomial 1, x\n"), doctest::Contains("polynomial coefficients"), IoError);
+  CHECK_THROWS_WITH_AS(bad("Xmp.Camera.VignettingPolynomial 1\nXmp.Camera.VignettingCenter 3\n"),
+                       doctest::Contains("two numbers"), IoError);
+  CHECK_THROWS_WITH_AS(bad("Xmp.exif.FocalPlaneXResolution 20\nXmp.exif.FocalPlaneResolutionUnit 7\n"),
+                       doctest::Contains("resolution unit"), IoError);
+  CHECK_THROWS_WITH_AS(bad("Exif.Image.BitsPerSample 12.5\n"), doctest::Contains("bit depth"), IoError);
+  CHECK_THROWS_WITH_AS(bad("Xmp.exif.ExposureTime " + std::string(5000, '9') + "\n"), doctest::Contains("exposure"), IoError);
+  std::string seventeen = "Xmp.Camera.VignettingPolynomial 1";
+  for (int i = 0; i < 16; ++i) seventeen += ",1";
+  CHECK_THROWS_WITH_AS(bad(seventeen + "\n"),
+                       doctest::Contains("up to 16"), IoError);
+}
+
+TEST_CASE("radiometry: known DN gives known relative radiance") {
+  // DN = black + L * exposure * gain * falloff(r) * sensitivity; the normalisation returns L * sensitivity.
+  FrameRadiometry r;
+  r.steps = {true, true, true, true};
+  r.dn_max = 65535;
+  r.black_level = 4800;
+  r.exposure_s = 1.0 / 1000;
+  r.gain = 2;
+  r.vignetting_poly = {0, -1e-4};  // 1 - 1e-4 r^2
+  r.vignetting_cx = 10;
+  r.vignetting_cy = 20;
+  CHECK(vignetting_polynomial(r.vignetting_poly, 30.0) == doctest::Approx(1 - 0.09));
+  CHECK(vignetting_falloff(r, 10, 20) == 1.0);
+  CHECK(vignetting_falloff(r, 10 + 30, 20) == doctest::Approx(0.91));
+  const double L = 0.25, sens = 1e7;
+  const double dn_centre = 4800 + L * 0.001 * 2 * 1.0 * sens;   // 9800
+  const double dn_edge = 4800 + L * 0.001 * 2 * 0.91 * sens;    // 9350
+  CHECK(relative_radiance(dn_centre, 10, 20, r) == doctest::Approx(L * sens));
+  CHECK(relative_radiance(dn_edge, 40, 20, r) == doctest::Approx(L * sens));
+
+  msgs::Image<float> img(41, 21, 1);
+  img.at(10, 20, 0) = float(dn_centre / 65535);
+  img.at(40, 20, 0) = float(dn_edge / 65535);
+  img.at(0, 0, 0) = float(100.0 / 65535);  // below the black level: 0, not negative
+  r.scale = 1.0 / (L * sens);
+  const auto n = normalise_image(img, r, "a.tif");
+  CHECK(n.at(10, 20, 0) == doctest::Approx(1.0).epsilon(1e-5));
+  CHECK(n.at(40, 20, 0) == doctest::Approx(1.0).epsilon(1e-5));
+  CHECK(n.at(0, 0, 0) == 0.0f);
+  CHECK(max_value(n) == doctest::Approx(1.0).epsilon(1e-5));
+  CHECK(band_scale(4.0) == 0.25);
+  CHECK(band_scale(0.0) == 1.0);
+
+  // DJI convention: the polynomial is a correction that multiplies, i.e. fall-off 1 / p(r).
+  r.vignetting_kind = VignettingKind::correction;
+  r.vignetting_poly = {0, 1e-4};
+  CHECK(vignetting_falloff(r, 40, 20) == doctest::Approx(1.0 / 1.09));
+}
+
+TEST_CASE("radiometry: a band without some tag leaves that step out for all its images") {
+  CaptureMeta full = parse_capture_meta(kMicaSense, "a.tif");
+  CaptureMeta no_black = full;
+  no_black.black_level.reset();
+  const BandPlan p = plan_band({full, no_black, full}, {"a.tif", "b.tif", "c.tif"});
+  CHECK(!p.steps.black_level);
+  CHECK(p.steps.exposure);
+  CHECK(p.steps.gain);
+  CHECK(p.steps.vignetting);
+  REQUIRE(p.missing.count("black level"));
+  CHECK(p.missing.at("black level") == std::vector<std::filesystem::path>{"b.tif"});
+  const FrameRadiometry r = frame_radiometry(full, p.steps, 65535);
+  CHECK(r.black_level == 0.0);
+  CHECK(r.exposure_s == doctest::Approx(1.0 / 1246));
+  CHECK(!plan_band({}, {}).steps.any());
+}
+
+TEST_CASE("radiometry: parameters that cannot be right are errors naming the file") {
+  FrameRadiometry r;
+  msgs::Image<float> img(100, 100, 1);
+  r.exposure_s = 0;
+  CHECK_THROWS_WITH_AS(normalise_image(img, r, "x.tif"), doctest::Contains("x.tif: radiometric parameters"), IoError);
+  r.exposure_s = 0.001;
+  r.steps.vignetting = true;
+  r.vignetting_poly = {0, -1e-3};  // 1 - 1e-3 r^2 crosses zero at r = 31.6 px, inside the image
+  r.vignetting_cx = 50;
+  r.vignetting_cy = 50;
+  CHECK_THROWS_WITH_AS(normalise_image(img, r, "x.tif"), doctest::Contains("vignetting polynomial is"), IoError);
+}
