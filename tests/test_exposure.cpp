@@ -7,6 +7,7 @@
 #include <doctest/doctest.h>
 
 #include "fixtures.hpp"
+#include "../examples/report.hpp"  // result.json / metrics.md of `msgs train`
 
 #include <msgs/checkpoint.hpp>
 #include <msgs/exposure.hpp>
@@ -383,4 +384,41 @@ TEST_CASE("end to end: on training images darkened by known factors the learned 
   CAPTURE(worst);
   CHECK(corr > 0.95);
   CHECK(worst < 0.12);  // each image's gain relative to the others within ~12 % of the truth
+}
+
+TEST_CASE("result.json: \"exposure\" always, corrected metrics and learned gains only for exposure runs") {
+  RunResult r;
+  r.metrics.push_back(BandMetrics{"D", {20.0, 22.0}, {0.8, 0.9}});
+  const nlohmann::json off = cli::result_json(r);
+  CHECK(off["exposure"] == false);
+  CHECK_FALSE(off.contains("exposure_correction"));
+  CHECK_FALSE(off["metrics"]["D"].contains("psnr_cc_mean"));
+  CHECK_FALSE(off["metrics"]["All"].contains("psnr_cc_mean"));
+  CHECK(cli::metrics_markdown(r.metrics).find("colour-corrected") == std::string::npos);
+
+  r.exposure = true;
+  r.metrics[0].psnr_cc = {24.0, 26.0};
+  r.metrics[0].ssim_cc = {0.85, 0.95};
+  BandExposure e;
+  e.band = "D";
+  e.channels = 3;
+  e.files = {"images/D_1.png", "images/D_2.png"};
+  e.gain = {{0.5, 1.0, 1.5}, {2.0, 0.25, 1.0}};
+  e.offset = {{0.0, 0.1, -0.1}, {0.2, 0.0, 0.0}};
+  r.exposure_params.emplace_back("joint", e);
+  const nlohmann::json on = cli::result_json(r);
+  CHECK(on["exposure"] == true);
+  CHECK(on["metrics"]["D"]["psnr_cc_mean"].get<double>() == doctest::Approx(25.0));
+  CHECK(on["metrics"]["D"]["psnr_mean"].get<double>() == doctest::Approx(21.0));  // the plain render, as before
+  CHECK(on["metrics"]["All"]["psnr_cc_mean"].get<double>() == doctest::Approx(25.0));
+  const nlohmann::json& x = on["exposure_correction"][0];
+  CHECK(x["model"] == "joint");
+  CHECK(x["band"] == "D");
+  CHECK(x["images"] == 2);
+  CHECK(x["gain"][0]["min"].get<double>() == 0.5);
+  CHECK(x["gain"][0]["max"].get<double>() == 2.0);
+  CHECK(x["gain"][1]["mean"].get<double>() == doctest::Approx(0.625));
+  CHECK(x["offset"][2]["min"].get<double>() == -0.1);
+  CHECK(x["frames"][1]["file_path"] == "images/D_2.png");
+  CHECK(cli::metrics_markdown(r.metrics).find("PSNR (colour-corrected) | 25.00") != std::string::npos);
 }
