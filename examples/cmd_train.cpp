@@ -26,6 +26,7 @@ constexpr const char* kUsage =
     "                  [--bands D,MS_G,...] [--seed S] [--orient none|center] [--resume] [--checkpoint-every N]\n"
     "                  [--sheets N] [--adam sparse|dense] [--lr-sh-dc X] [--max-gaussians N]\n"
     "                  [--images NAME] [--eval-every N] [--geometry-band ID]\n"
+    "                  [--exposure [--lr-exposure X]]\n"
     "\n"
     "Train Gaussian splats on a multi-spectral dataset (nerfstudio-style layout, or a COLMAP scene) with one of the\n"
     "paper's strategies, evaluate every band on the eval split and write to DIR:\n"
@@ -57,6 +58,13 @@ constexpr const char* kUsage =
     "                    not see it: torch's Adam, the reference implementation's behaviour) or sparse\n"
     "                    (gradients, Adam and the scale regulariser only for the Gaussians the view\n"
     "                    saw; unseen ones and their moments stay: faster, a different optimisation)\n"
+    "  --exposure        learn a per-image exposure correction: a gain exp(a_c) and an offset b_c per\n"
+    "                    channel of every training image, applied to its render before the loss\n"
+    "                    (Adam, only the sampled image's values per step). Eval images have none: they\n"
+    "                    are scored on the plain render and, in addition, colour-corrected (PSNR/SSIM\n"
+    "                    after the least-squares affine per image and channel onto the ground truth);\n"
+    "                    result.json gets the learned gains and offsets. Default off\n"
+    "  --lr-exposure X   Adam learning rate of the log-gains and offsets (default 0.001)\n"
     "  --seed S          seed of sampling, backgrounds and initial colours (default 0)\n"
     "  --orient MODE     center (default: mean camera up -> +z, mean camera position -> origin,\n"
     "                    recorded as `transform` in result.json) or none (keep the dataset's coordinates;\n"
@@ -76,8 +84,8 @@ using msgs::cli::split_list;
 int run_train(const std::vector<std::string>& argv) {
   const msgs::cli::Args args(argv,
                              {"data", "images", "eval-every", "out", "strategy", "scale", "sh-degree", "bands", "seed", "checkpoint-every", "orient", "densify",
-                              "sheets", "max-gaussians", "lr-sh-dc", "adam", "geometry-band"},
-                             {"help", "no-orient", "quiet", "resume"});
+                              "sheets", "max-gaussians", "lr-sh-dc", "adam", "geometry-band", "lr-exposure"},
+                             {"help", "no-orient", "quiet", "resume", "exposure"});
   if (args.flag("help")) { std::fputs(kUsage, stdout); return 0; }
   if (!args.positional().empty()) throw msgs::cli::UsageError("unexpected argument '" + args.positional()[0] + "'");
   const std::filesystem::path data = args.require("data"), out = args.require("out");
@@ -97,6 +105,11 @@ int run_train(const std::vector<std::string>& argv) {
   if (adam_mode != "sparse" && adam_mode != "dense")
     throw msgs::cli::UsageError("--adam must be sparse or dense, got '" + adam_mode + "'");
   cfg.train.sparse = adam_mode == "sparse";
+  cfg.train.exposure = args.flag("exposure");
+  if (args.has("lr-exposure") && !cfg.train.exposure) throw msgs::cli::UsageError("--lr-exposure needs --exposure");
+  cfg.train.lr_exposure = args.number("lr-exposure", cfg.train.lr_exposure);
+  if (!(std::isfinite(cfg.train.lr_exposure) && cfg.train.lr_exposure >= 0))
+    throw msgs::cli::UsageError("--lr-exposure must be a finite number >= 0");
   cfg.init.seed = std::uint32_t(cfg.train.seed);
   cfg.resume = args.flag("resume");
   try {
@@ -151,6 +164,7 @@ int run_train(const std::vector<std::string>& argv) {
   j["images"] = args.get("images", "images");
   j["eval_images"] = std::count_if(ds.frames.begin(), ds.frames.end(),
                                    [](const msgs::io::Frame& f) { return f.split == msgs::io::Split::eval; });
+  if (cfg.train.exposure) j["lr_exposure"] = cfg.train.lr_exposure;
   j["transform"] = std::vector<float>(ds.transform.data(), ds.transform.data() + 16);
   msgs::io::write_text_atomic(out / "result.json", j.dump(2) + "\n");
   const std::string table = msgs::cli::metrics_markdown(res.metrics);
@@ -161,6 +175,13 @@ int run_train(const std::vector<std::string>& argv) {
   const auto& t = res.times;
   std::printf("\ntime (s): project %.1f  bin %.1f  blend %.1f  loss %.1f  backward %.1f  adam %.1f  densify %.1f  load %.1f  eval %.1f\n",
               t.project, t.bin, t.blend, t.loss, t.backward, t.adam, t.densify, t.load, t.eval);
+  for (const auto& [model, e] : res.exposure_params) {
+    double gmin = 1e300, gmax = -1e300;
+    for (const auto& g : e.gain)
+      for (double x : g) { gmin = std::min(gmin, x); gmax = std::max(gmax, x); }
+    std::printf("exposure gains %s/%s: %.3f .. %.3f over %zu training images\n", model.c_str(), e.band.c_str(), gmin, gmax,
+                e.files.size());
+  }
   std::printf("LPIPS: not computed (needs pretrained network weights, unavailable offline)\n");
   if (res.interrupted)
     std::printf("interrupted: models and metrics reflect the state at the stop; continue with --resume\n");

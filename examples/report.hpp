@@ -2,8 +2,10 @@
 // by `msgs train`, `msgs eval` and `msgs study`.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -24,15 +26,50 @@ inline std::string band_label(const std::string& id) {
   return id;
 }
 
-/// Mean over bands of the per-band means ("All" of the paper's tables: each band weighs the same).
-inline double all_bands_mean(const std::vector<BandMetrics>& m, bool use_psnr) {
+/// Mean over bands of the per-band means ("All" of the paper's tables: each band weighs the same);
+/// `corrected`: of the colour-corrected values (exposure runs).
+inline double all_bands_mean(const std::vector<BandMetrics>& m, bool use_psnr, bool corrected = false) {
   double s = 0;
   int n = 0;
   for (const auto& b : m) {
-    const double v = BandMetrics::mean(use_psnr ? b.psnr : b.ssim);
+    const double v = BandMetrics::mean(corrected ? (use_psnr ? b.psnr_cc : b.ssim_cc) : (use_psnr ? b.psnr : b.ssim));
     if (std::isfinite(v)) { s += v; ++n; }
   }
   return n ? s / n : std::nan("");
+}
+
+/// Whether any band carries colour-corrected metrics (a run with exposure compensation).
+inline bool has_colour_corrected(const std::vector<BandMetrics>& m) {
+  return std::any_of(m.begin(), m.end(), [](const BandMetrics& b) { return !b.psnr_cc.empty(); });
+}
+
+/// The learned per-image corrections: per model and band, the range and mean of the gains and
+/// offsets per channel, and every training image's values.
+inline nlohmann::json exposure_json(const RunResult& r) {
+  nlohmann::json out = nlohmann::json::array();
+  for (const auto& [model, e] : r.exposure_params) {
+    nlohmann::json jb;
+    jb["model"] = model;
+    jb["band"] = e.band;
+    jb["images"] = e.files.size();
+    auto stats = [&](const std::vector<std::vector<double>>& v) {
+      nlohmann::json s = nlohmann::json::array();
+      for (int c = 0; c < e.channels; ++c) {
+        double lo = std::numeric_limits<double>::infinity(), hi = -lo, sum = 0;
+        for (const auto& x : v) { const double y = x[std::size_t(c)]; lo = std::min(lo, y); hi = std::max(hi, y); sum += y; }
+        s.push_back({{"min", lo}, {"max", hi}, {"mean", v.empty() ? std::nan("") : sum / double(v.size())}});
+      }
+      return s;
+    };
+    jb["gain"] = stats(e.gain);      // per channel
+    jb["offset"] = stats(e.offset);  // per channel
+    nlohmann::json frames = nlohmann::json::array();
+    for (std::size_t i = 0; i < e.files.size(); ++i)
+      frames.push_back({{"file_path", e.files[i]}, {"gain", e.gain[i]}, {"offset", e.offset[i]}});
+    jb["frames"] = frames;
+    out.push_back(jb);
+  }
+  return out;
 }
 
 inline nlohmann::json metrics_json(const std::vector<BandMetrics>& metrics) {
@@ -46,9 +83,21 @@ inline nlohmann::json metrics_json(const std::vector<BandMetrics>& metrics) {
     e["ssim_mean"] = BandMetrics::mean(b.ssim);
     e["ssim_std"] = BandMetrics::stddev(b.ssim);
     e["images"] = b.psnr.size();
+    if (!b.psnr_cc.empty()) {  // exposure runs: colour-corrected (least-squares affine per image and channel)
+      e["psnr_cc"] = b.psnr_cc;
+      e["ssim_cc"] = b.ssim_cc;
+      e["psnr_cc_mean"] = BandMetrics::mean(b.psnr_cc);
+      e["psnr_cc_std"] = BandMetrics::stddev(b.psnr_cc);
+      e["ssim_cc_mean"] = BandMetrics::mean(b.ssim_cc);
+      e["ssim_cc_std"] = BandMetrics::stddev(b.ssim_cc);
+    }
     j[b.band] = e;
   }
   j["All"] = {{"psnr_mean", all_bands_mean(metrics, true)}, {"ssim_mean", all_bands_mean(metrics, false)}};
+  if (has_colour_corrected(metrics)) {
+    j["All"]["psnr_cc_mean"] = all_bands_mean(metrics, true, true);
+    j["All"]["ssim_cc_mean"] = all_bands_mean(metrics, false, true);
+  }
   j["lpips"] = "not computed: LPIPS needs pretrained network weights, which cannot be obtained offline";
   return j;
 }
@@ -93,6 +142,8 @@ inline nlohmann::json result_json(const RunResult& r) {
   j["seconds"] = r.seconds;
   j["steps"] = r.steps;
   j["interrupted"] = r.interrupted;
+  j["exposure"] = r.exposure;
+  if (r.exposure) j["exposure_correction"] = exposure_json(r);
   return j;
 }
 
@@ -109,15 +160,17 @@ inline std::string metrics_markdown(const std::vector<BandMetrics>& metrics, con
   sep += "|\n";
   std::string out = head + sep;
   char buf[64];
-  for (int m = 0; m < 2; ++m) {
-    const bool p = m == 0;
-    out += "| " + (label.empty() ? std::string(p ? "PSNR" : "SSIM") : label + (p ? " PSNR" : " SSIM"));
-    std::snprintf(buf, sizeof buf, p ? " | %.2f" : " | %.3f", all_bands_mean(metrics, p));
+  const int rows = has_colour_corrected(metrics) ? 4 : 2;  // then PSNR / SSIM colour-corrected
+  for (int m = 0; m < rows; ++m) {
+    const bool p = m % 2 == 0, cc = m >= 2;
+    const std::string name = std::string(p ? "PSNR" : "SSIM") + (cc ? " (colour-corrected)" : "");
+    out += "| " + (label.empty() ? name : label + " " + name);
+    std::snprintf(buf, sizeof buf, p ? " | %.2f" : " | %.3f", all_bands_mean(metrics, p, cc));
     out += buf;
     for (const auto& id : report_bands()) {
       const BandMetrics* b = find(id);
       if (!b) continue;
-      const auto& v = p ? b->psnr : b->ssim;
+      const auto& v = cc ? (p ? b->psnr_cc : b->ssim_cc) : (p ? b->psnr : b->ssim);
       std::snprintf(buf, sizeof buf, p ? " | %.2f ± %.2f" : " | %.3f ± %.3f", BandMetrics::mean(v), BandMetrics::stddev(v));
       out += buf;
     }

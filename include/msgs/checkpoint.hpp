@@ -1,6 +1,7 @@
 // include/msgs/checkpoint.hpp
 // Training checkpoints: everything a run needs to continue bit for bit (model, Adam moments and
-// counters, densification statistics, the next step) in one little-endian binary file, written
+// counters, densification statistics, the next step; the per-image exposure corrections and their
+// Adam state when the run learns them) in one little-endian binary file, written
 // atomically so an interrupted write never replaces a good checkpoint.
 #pragma once
 
@@ -16,6 +17,7 @@
 
 #include "adam.hpp"
 #include "densify.hpp"
+#include "exposure.hpp"
 #include "gaussian.hpp"
 #include "io/file.hpp"
 
@@ -33,6 +35,7 @@ struct TrainState {
   std::vector<float> stats_grad;          // [N, B]
   std::vector<std::uint32_t> stats_count; // [N, B]
   std::vector<float> stats_radius;        // [N]
+  ExposureState exposure;                 ///< per-image corrections (empty unless TrainOptions::exposure)
 };
 
 namespace detail {
@@ -41,6 +44,10 @@ namespace detail {
 /// and still loads (transposed on reading).
 inline constexpr char kCheckpointMagic[8] = {'M', 'S', 'G', 'S', 'C', 'K', 'P', '2'};
 inline constexpr char kCheckpointMagicV1[8] = {'M', 'S', 'G', 'S', 'C', 'K', 'P', '1'};
+/// Optional section after the densification statistics, present only when the run learns exposure
+/// corrections (exposure.hpp); its tag carries its own version. Checkpoints without it (every run
+/// without exposure, every older file) end right after the statistics, as before.
+inline constexpr char kExposureSectionTag[8] = {'E', 'X', 'P', 'O', 'S', 'R', 'E', '1'};
 
 class CkptWriter {
  public:
@@ -79,10 +86,19 @@ class CkptReader {
     pos_ += n * sizeof(T);
     return v;
   }
+  /// The next value without consuming it.
+  template <class T>
+  T peek(const char* field) const {
+    need(sizeof(T), field);
+    T v;
+    std::memcpy(&v, b_.data() + pos_, sizeof(T));
+    return v;
+  }
   [[noreturn]] void fail(const char* field, const std::string& what) const {
     throw std::runtime_error("checkpoint " + path_.string() + ": field '" + field + "' " + what);
   }
   bool at_end() const { return pos_ == b_.size(); }
+  std::size_t remaining() const { return b_.size() - pos_; }
 
  private:
   void need(std::uint64_t n, const char* field) const {
@@ -141,6 +157,20 @@ void save_checkpoint(const std::filesystem::path& path, const TrainState<G>& st)
   w.vec(st.stats_grad);
   w.vec(st.stats_count);
   w.vec(st.stats_radius);
+  if (!st.exposure.empty()) {
+    const ExposureState& e = st.exposure;
+    e.validate("save_checkpoint");
+    for (char c : detail::kExposureSectionTag) w.pod(c);
+    w.vec(e.frames);
+    w.vec(e.channels);
+    w.vec(e.log_gain);
+    w.vec(e.offset);
+    w.vec(e.m_log_gain);
+    w.vec(e.v_log_gain);
+    w.vec(e.m_offset);
+    w.vec(e.v_offset);
+    w.vec(e.steps);
+  }
   io::write_text_atomic(path, w.bytes());
 }
 
@@ -176,7 +206,37 @@ TrainState<G> load_checkpoint(const std::filesystem::path& path) {
   st.stats_grad = r.vec<float>("stats_grad", n * std::uint64_t(st.stats_bands));
   st.stats_count = r.vec<std::uint32_t>("stats_count", n * std::uint64_t(st.stats_bands));
   st.stats_radius = r.vec<float>("stats_radius", n);
-  if (!r.at_end()) r.fail("end", "has trailing bytes");
+  if (!r.at_end()) {
+    // Anything after the statistics must be the exposure section; else it is trailing garbage.
+    if (r.remaining() < sizeof detail::kExposureSectionTag) r.fail("end", "has trailing bytes");
+    char tag[8];
+    for (char& c : tag) c = r.pod<char>("exposure");
+    if (!std::equal(tag, tag + 8, detail::kExposureSectionTag))
+      r.fail("end", "has trailing bytes (not an exposure section EXPOSRE1)");
+    ExposureState& e = st.exposure;
+    const auto frames = r.peek<std::uint64_t>("exposure_frames");
+    if (frames == 0 || frames > (std::uint64_t(1) << 32)) r.fail("exposure_frames", "is out of range");
+    e.frames = r.vec<std::uint64_t>("exposure_frames", frames);
+    e.channels = r.vec<std::int32_t>("exposure_channels", frames);
+    std::uint64_t values = 0;
+    for (auto c : e.channels) {
+      if (c < 1 || c > 8) r.fail("exposure_channels", "holds a channel count outside 1..8");
+      values += std::uint64_t(c);
+    }
+    e.log_gain = r.vec<float>("exposure_log_gain", values);
+    e.offset = r.vec<float>("exposure_offset", values);
+    e.m_log_gain = r.vec<float>("exposure_m_log_gain", values);
+    e.v_log_gain = r.vec<float>("exposure_v_log_gain", values);
+    e.m_offset = r.vec<float>("exposure_m_offset", values);
+    e.v_offset = r.vec<float>("exposure_v_offset", values);
+    e.steps = r.vec<std::int64_t>("exposure_steps", frames);
+    try {
+      e.validate("checkpoint " + path.string());
+    } catch (const std::runtime_error& err) {
+      r.fail("exposure", std::string("is inconsistent: ") + err.what());
+    }
+    if (!r.at_end()) r.fail("end", "has trailing bytes");
+  }
   return st;
 }
 

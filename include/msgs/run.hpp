@@ -59,6 +59,9 @@ struct RunResult {
   double seconds = 0;                            ///< wall time of the whole run
   long long steps = 0;                           ///< optimisation steps over every model
   bool interrupted = false;                      ///< stopped early by TrainOptions::stop
+  bool exposure = false;                         ///< per-image exposure correction learned (TrainOptions::exposure)
+  /// With exposure: the learned gains and offsets per model and band (model key, as `gaussians`).
+  std::vector<std::pair<std::string, BandExposure>> exposure_params;
 };
 
 namespace detail {
@@ -183,6 +186,7 @@ GaussianModel<G, float> train_model(const io::Dataset& ds, std::vector<TrainBand
   res.steps += reached - begin;
   if (reached < end) res.interrupted = true;
   for (auto& m : tr.evaluate()) res.metrics.push_back(std::move(m));
+  for (auto& e : tr.exposure_report()) res.exposure_params.emplace_back(key, std::move(e));
   res.times += tr.times();
   res.gaussians[key] = tr.model().size();
   if (!out_dir.empty()) {
@@ -208,6 +212,7 @@ RunResult run_experiment(const io::Dataset& ds, const RunConfig& cfg, const std:
   StrategySpec spec = parse_strategy(cfg.strategy, scale, cfg.densify);
   spec.plan.densify.max_gaussians = cfg.max_gaussians;
   RunResult res;
+  res.exposure = cfg.train.exposure;
   res.strategy = spec.plan.name;
   res.plan = spec.plan;
   std::vector<TrainBand> bands = detail::run_bands(ds, cfg.bands, cfg.geometry_band);

@@ -20,6 +20,7 @@
 #include "adam.hpp"
 #include "checkpoint.hpp"
 #include "densify.hpp"
+#include "exposure.hpp"
 #include "gaussian.hpp"
 #include "io/dataset.hpp"
 #include "loss.hpp"
@@ -86,12 +87,20 @@ struct TrainOptions {
   /// and when stopped early, so an interrupted run always leaves a usable checkpoint.
   std::filesystem::path checkpoint_path;
   int checkpoint_every = 0;          ///< 0: only at the end and when stopped
+  /// Exposure compensation (exposure.hpp): learn a gain exp(a_c) and an offset b_c per channel of
+  /// every training image and compare g * render + b with it. Off (default): no exposure state at
+  /// all and training is bit-identical to a build without the feature.
+  bool exposure = false;
+  double lr_exposure = 1e-3;         ///< Adam learning rate of the log-gains and offsets
 };
 
 /// Per-band evaluation: one PSNR and SSIM per eval image.
 struct BandMetrics {
   std::string band;
   std::vector<double> psnr, ssim;
+  /// Colour-corrected PSNR / SSIM per eval image (exposure runs only, else empty): the render
+  /// after the least-squares affine per channel onto the ground truth (colour_correct).
+  std::vector<double> psnr_cc = {}, ssim_cc = {};
   static double mean(const std::vector<double>& v) {
     if (v.empty()) return std::nan("");
     double s = 0; for (double x : v) s += x; return s / double(v.size());
@@ -102,6 +111,14 @@ struct BandMetrics {
     double s = 0; for (double x : v) s += (x - m) * (x - m);
     return std::sqrt(s / double(v.size() - 1));
   }
+};
+
+/// The learned corrections of one band's training images, for reports (exposure runs).
+struct BandExposure {
+  std::string band;
+  int channels = 1;
+  std::vector<std::string> files;                  ///< file_path per training image
+  std::vector<std::vector<double>> gain, offset;   ///< per image, per channel: exp(a_c), b_c
 };
 
 /// Caches a dataset's images at the current training resolution (one resolution at a time).
@@ -150,6 +167,15 @@ class Trainer {
     ac.scene_scale = opt_.scene_scale;
     adam_ = Adam<G, float>(ac, model_.size());
     band_psnr_.assign(bands_.size(), std::nan(""));
+    if (opt_.exposure) {
+      std::vector<std::pair<std::size_t, int>> frames;
+      for (const auto& b : bands_)
+        for (std::size_t f : b.train_frames) frames.emplace_back(f, b.channels);
+      ExposureConfig ec;
+      ec.lr = opt_.lr_exposure;
+      exposure_ = Exposure(ds.frames.size(), std::move(frames), ec);
+      for (const auto& b : bands_) exposure_.add_gauge_group(b.train_frames);  // mean log-gain and offset 0
+    }
   }
 
   /// Everything needed to continue at `next_step` bit for bit.
@@ -166,11 +192,16 @@ class Trainer {
     st.stats_grad = ds.grad_sums();
     st.stats_count = ds.counts();
     st.stats_radius = ds.max_radii();
+    if (opt_.exposure) st.exposure = exposure_.state();
     return st;
   }
 
   /// Continue from a saved state; returns the step to resume at.
   long long restore(TrainState<G> st) {
+    if (opt_.exposure != !st.exposure.empty())
+      throw std::runtime_error(opt_.exposure ? "cannot resume with exposure compensation on: the checkpoint was written without it"
+                                             : "cannot resume without exposure compensation: the checkpoint was written with it on");
+    if (opt_.exposure) exposure_.restore(std::move(st.exposure), "checkpoint");
     model_ = std::move(st.model);
     adam_.exp_avg = std::move(st.exp_avg);
     adam_.exp_avg_sq = std::move(st.exp_avg_sq);
@@ -188,6 +219,30 @@ class Trainer {
   const StageTimes& times() const { return times_; }
   const std::vector<TrainBand>& bands() const { return bands_; }
   const TrainPlan& plan() const { return plan_; }
+  /// The learned per-image corrections, or nullptr when TrainOptions::exposure is off.
+  const Exposure* exposure() const { return opt_.exposure ? &exposure_ : nullptr; }
+  Exposure* exposure() { return opt_.exposure ? &exposure_ : nullptr; }
+
+  /// Gains and offsets per band and training image (empty when exposure is off).
+  std::vector<BandExposure> exposure_report() const {
+    std::vector<BandExposure> out;
+    if (!opt_.exposure) return out;
+    for (const auto& b : bands_) {
+      BandExposure e;
+      e.band = b.id;
+      e.channels = b.channels;
+      for (std::size_t f : b.train_frames) {
+        e.files.push_back(ds_->frames[f].file_path);
+        std::vector<double> g, o;
+        for (float a : exposure_.log_gain(f)) g.push_back(std::exp(double(a)));
+        for (float x : exposure_.offset(f)) o.push_back(double(x));
+        e.gain.push_back(std::move(g));
+        e.offset.push_back(std::move(o));
+      }
+      out.push_back(std::move(e));
+    }
+    return out;
+  }
 
   /// Train steps [begin, end). Returns the first step not taken (end, or earlier when stopped).
   long long train(long long begin, long long end) {
@@ -196,6 +251,7 @@ class Trainer {
     Rasterizer<G, float, kTrainRaster> raster;
     Gradients<G, float> grads;
     Image<float> d_image;
+    Image<float> corrected;  // exposure: g * render + b, what the loss sees
     SsimWorkspace<float> ws;
     double loss_sum = 0;
     long long loss_n = 0;
@@ -226,16 +282,20 @@ class Trainer {
       const Image<float>& render = raster.forward(model_, cam, rs);
       auto t2 = clock::now();
 
-      // 3. Loss and its gradient.
-      const double loss = photometric_loss(render, gt, &d_image, ws, opt_.loss);
+      // 3. Loss and its gradient (of the exposure-corrected render when exposure is on).
+      if (opt_.exposure) exposure_.forward(frame, render, corrected);
+      const Image<float>& seen_image = opt_.exposure ? corrected : render;
+      const double loss = photometric_loss(seen_image, gt, &d_image, ws, opt_.loss);
       loss_sum += loss;
       ++loss_n;
-      const double p = psnr(render, gt);
+      const double p = psnr(seen_image, gt);
       double& bp = band_psnr_[std::size_t(bi)];
       bp = std::isnan(bp) ? p : 0.9 * bp + 0.1 * p;
       auto t3 = clock::now();
 
-      // 4. Backward.
+      // 4. Backward: through the exposure correction (its Adam step on this image's parameters
+      // only, taken here since nothing else reads them), then the rasteriser.
+      if (opt_.exposure) exposure_.backward_and_step(frame, render, d_image);
       const std::vector<std::uint32_t>& seen = raster.visible();
       const std::vector<std::uint32_t>* rows = opt_.sparse ? &seen : nullptr;
       raster.backward(d_image, nullptr, nullptr, grads, opt_.sparse ? GradientFill::visible : GradientFill::dense);
@@ -287,7 +347,9 @@ class Trainer {
   }
 
   /// PSNR and SSIM of every eval image of every band at full resolution, with the evaluation
-  /// background (REFERENCE §3) and renders clamped to [0, 1].
+  /// background (REFERENCE §3) and renders clamped to [0, 1]. Rendered without any exposure
+  /// correction (eval images have no learned one); with exposure on, also the colour-corrected
+  /// PSNR / SSIM (least-squares affine per image and channel, BandMetrics::psnr_cc).
   std::vector<BandMetrics> evaluate(bool eval_split = true) {
     const auto t0 = std::chrono::steady_clock::now();
     std::vector<BandMetrics> out;
@@ -307,6 +369,11 @@ class Trainer {
         const Image<float>& gt = full.get(f, 1);
         m.psnr.push_back(psnr(render, gt));
         m.ssim.push_back(ssim(render, gt));
+        if (opt_.exposure) {
+          const Image<float> cc = colour_correct(render, gt);
+          m.psnr_cc.push_back(psnr(cc, gt));
+          m.ssim_cc.push_back(ssim(cc, gt));
+        }
       }
       out.push_back(std::move(m));
     }
@@ -396,6 +463,7 @@ class Trainer {
   TrainOptions opt_;
   ImageCache images_;
   Adam<G, float> adam_;
+  Exposure exposure_;  // empty unless opt_.exposure
   DensityControl density_;
   StageTimes times_;
   std::vector<double> band_psnr_;
