@@ -92,24 +92,6 @@ struct Item {
   int width = 0, height = 0;
 };
 
-/// Removes a directory tree on scope exit unless released.
-struct TreeGuard {
-  fs::path dir;
-  bool armed = true;
-  ~TreeGuard() {
-    if (!armed || dir.empty()) return;
-    std::error_code ec;
-    fs::remove_all(dir, ec);
-  }
-};
-
-fs::path sibling(const fs::path& out, const char* tag) {
-  char buf[40];
-  const auto stamp = static_cast<unsigned long long>(Clock::now().time_since_epoch().count());
-  std::snprintf(buf, sizeof buf, "%llx-%d", stamp, static_cast<int>(::getpid()));
-  return out.parent_path() / cat(".", out.filename().string(), tag, buf);
-}
-
 /// Bits per sample of a TIFF (0 when it is not a readable TIFF).
 int tiff_bits(const fs::path& p) {
   msgs::io::detail::TiffFile tf(p, "r");
@@ -293,15 +275,13 @@ int run_import(const std::vector<std::string>& argv) {
     }
 
   // ---- temporary folders: layout (renamed to --out at the end) and COLMAP work
-  fs::create_directories(out.parent_path(), ec);
-  if (ec) fail(out.parent_path(), cat("cannot create the parent folder: ", ec.message()));
-  const fs::path tmp = sibling(out, ".import-tmp-");
+  msgs::io::StagedDirectory stage(out, ".import-tmp-");
+  const fs::path& tmp = stage.dir();
   const fs::path layout = tmp / "layout", work = tmp / "work";
   fs::create_directories(layout / "images", ec);
   if (!ec) fs::create_directories(work / "images", ec);
   if (ec) fail(tmp, cat("cannot create the temporary folder: ", ec.message()));
-  TreeGuard guard{tmp};
-  if (args.flag("keep-work")) guard.armed = false;
+  if (args.flag("keep-work")) stage.keep();
   const fs::path log = work / "colmap.log";
 
   // ---- 2. metadata (exiv2)
@@ -581,19 +561,7 @@ int run_import(const std::vector<std::string>& argv) {
   if (check.frames.size() != n_frames) fail(layout / "transforms.json", "self-check: frame count differs after loading");
 
   // ---- 7. into place
-  fs::path old;
-  if (fs::exists(out, ec)) {
-    old = sibling(out, ".import-old-");
-    fs::rename(out, old, ec);
-    if (ec) fail(out, cat("cannot move the existing folder aside: ", ec.message()));
-  }
-  fs::rename(layout, out, ec);
-  if (ec) {
-    std::error_code ec2;
-    if (!old.empty()) fs::rename(old, out, ec2);
-    fail(out, cat("cannot rename the finished dataset into place: ", ec.message()));
-  }
-  if (!old.empty()) fs::remove_all(old, ec);
+  stage.commit("layout");
   if (args.flag("keep-work")) std::printf("  work folder kept: %s\n", work.string().c_str());
 
   std::printf("wrote %s\n", out.string().c_str());

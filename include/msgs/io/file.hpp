@@ -40,19 +40,24 @@ inline std::string read_text(const std::filesystem::path& p) {
   return std::string(b.begin(), b.end());
 }
 
+/// A hidden name beside `target` that no other call (thread or process) gets:
+/// <dir>/.<name><tag><16 hex digits>. Beside, so that the final rename stays on one file system.
+inline std::filesystem::path unique_sibling(const std::filesystem::path& target, const char* tag) {
+  static std::atomic<std::uint64_t> counter{0};
+  const auto stamp = static_cast<std::uint64_t>(std::chrono::steady_clock::now().time_since_epoch().count());
+  const auto tid = static_cast<std::uint64_t>(std::hash<std::thread::id>{}(std::this_thread::get_id()));
+  const std::uint64_t id = stamp ^ (tid << 1) ^ (counter.fetch_add(1) * 0x9E3779B97F4A7C15ull);
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(id));
+  return target.parent_path() / cat(".", target.filename().string(), tag, buf);
+}
+
 /// A temporary path beside `target` (same directory, so the final rename is atomic). The temporary
 /// is removed on destruction unless commit() succeeded.
 class AtomicFile {
  public:
-  explicit AtomicFile(std::filesystem::path target) : target_(std::move(target)) {
-    static std::atomic<std::uint64_t> counter{0};
-    const auto stamp = static_cast<std::uint64_t>(std::chrono::steady_clock::now().time_since_epoch().count());
-    const auto tid = static_cast<std::uint64_t>(std::hash<std::thread::id>{}(std::this_thread::get_id()));
-    const std::uint64_t id = stamp ^ (tid << 1) ^ (counter.fetch_add(1) * 0x9E3779B97F4A7C15ull);
-    char buf[32];
-    std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(id));
-    temp_ = target_.parent_path() / cat(".", target_.filename().string(), ".tmp-", buf);
-  }
+  explicit AtomicFile(std::filesystem::path target)
+      : target_(std::move(target)), temp_(unique_sibling(target_, ".tmp-")) {}
   AtomicFile(const AtomicFile&) = delete;
   AtomicFile& operator=(const AtomicFile&) = delete;
   ~AtomicFile() {
@@ -77,6 +82,60 @@ class AtomicFile {
  private:
   std::filesystem::path target_, temp_;
   bool committed_ = false;
+};
+
+/// A directory tree built under a hidden name beside `target` and swapped into place by commit():
+/// a failed run leaves nothing at `target`, and an existing `target` is only deleted once the new
+/// tree is in place. The stage is removed on destruction unless committed or kept.
+class StagedDirectory {
+ public:
+  /// Create the parent of `target` and the stage `.<name><tag><unique>` beside it.
+  StagedDirectory(std::filesystem::path target, const char* tag) : target_(std::move(target)) {
+    namespace fs = std::filesystem;
+    if (target_.filename().empty()) target_ = target_.parent_path();  // "dir/" -> "dir"
+    std::error_code ec;
+    if (!target_.parent_path().empty()) fs::create_directories(target_.parent_path(), ec);
+    if (ec) fail(target_.parent_path(), cat("cannot create the parent folder: ", ec.message()));
+    dir_ = unique_sibling(target_, tag);
+    fs::create_directories(dir_, ec);
+    if (ec) fail(dir_, cat("cannot create the temporary folder: ", ec.message()));
+  }
+  StagedDirectory(const StagedDirectory&) = delete;
+  StagedDirectory& operator=(const StagedDirectory&) = delete;
+  ~StagedDirectory() {
+    if (keep_) return;
+    std::error_code ec;
+    std::filesystem::remove_all(dir_, ec);
+  }
+
+  const std::filesystem::path& dir() const { return dir_; }
+  const std::filesystem::path& target() const { return target_; }
+  /// Leave the stage on disk whatever happens (for inspecting a failure).
+  void keep() { keep_ = true; }
+
+  /// Move dir() / `sub` (dir() itself when empty) onto the target; the rest of the stage goes with
+  /// the destructor. An existing target is moved aside first and put back if the rename fails.
+  void commit(const std::filesystem::path& sub = {}) {
+    namespace fs = std::filesystem;
+    std::error_code ec;
+    fs::path old;
+    if (fs::exists(target_, ec)) {
+      old = unique_sibling(target_, ".old-");
+      fs::rename(target_, old, ec);
+      if (ec) fail(target_, cat("cannot move the existing folder aside: ", ec.message()));
+    }
+    fs::rename(sub.empty() ? dir_ : dir_ / sub, target_, ec);
+    if (ec) {
+      std::error_code ec2;
+      if (!old.empty()) fs::rename(old, target_, ec2);
+      fail(target_, cat("cannot rename the finished folder into place: ", ec.message()));
+    }
+    if (!old.empty()) fs::remove_all(old, ec);
+  }
+
+ private:
+  std::filesystem::path target_, dir_;
+  bool keep_ = false;
 };
 
 /// Write `n` bytes to `p` atomically.

@@ -118,24 +118,6 @@ inline std::string ply_text(const SparsePoints& pts) {
   return s;
 }
 
-/// Removes a directory tree on scope exit unless released (the partial output of a failed run).
-struct TreeGuard {
-  std::filesystem::path dir;
-  bool armed = true;
-  ~TreeGuard() {
-    if (!armed) return;
-    std::error_code ec;
-    std::filesystem::remove_all(dir, ec);
-  }
-};
-
-inline std::filesystem::path sibling(const std::filesystem::path& out, const char* tag, std::uint64_t salt) {
-  char buf[32];
-  const auto stamp = static_cast<std::uint64_t>(std::chrono::steady_clock::now().time_since_epoch().count());
-  std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(hash_mix(stamp, salt)));
-  return out.parent_path() / io::cat(".", out.filename().string(), tag, buf);  // cat: dodges GCC 12 -Wrestrict
-}
-
 }  // namespace detail
 
 /// Render the scene of `opt.preset` / `opt.seed` and write it as a dataset at `out`. Everything is
@@ -151,13 +133,10 @@ inline SynthSummary write_synthetic_dataset(const std::filesystem::path& out_arg
   std::error_code ec;
   if (fs::exists(out, ec) && !opt.overwrite)
     io::fail(out, "output directory already exists (choose another one, or overwrite: --force / SynthOptions::overwrite)");
-  fs::create_directories(out.parent_path(), ec);
-  if (ec) io::fail(out.parent_path(), io::cat("cannot create parent directory: ", ec.message()));
-
-  const fs::path tmp = detail::sibling(out, ".synth-tmp-", opt.seed);
+  io::StagedDirectory stage(out, ".synth-tmp-");
+  const fs::path& tmp = stage.dir();
   fs::create_directories(tmp / "images", ec);
   if (ec) io::fail(tmp, io::cat("cannot create temporary output directory: ", ec.message()));
-  detail::TreeGuard guard{tmp};
   for (int f : preset.downscales) fs::create_directories(tmp / ("images_" + std::to_string(f)));
 
   const SynthScene scene = make_scene(preset, opt.seed);
@@ -210,20 +189,7 @@ inline SynthSummary write_synthetic_dataset(const std::filesystem::path& out_arg
   for (auto o : pts.outlier) sum.outliers += o;
 
   // Swap into place; an old dataset is moved aside first and only deleted once the new one is in.
-  fs::path old;
-  if (fs::exists(out, ec)) {
-    old = detail::sibling(out, ".synth-old-", opt.seed + 1);
-    fs::rename(out, old, ec);
-    if (ec) io::fail(out, io::cat("cannot move the existing directory aside: ", ec.message()));
-  }
-  fs::rename(tmp, out, ec);
-  if (ec) {
-    std::error_code ec2;
-    if (!old.empty()) fs::rename(old, out, ec2);
-    io::fail(out, io::cat("cannot rename the finished dataset into place: ", ec.message()));
-  }
-  guard.armed = false;
-  if (!old.empty()) fs::remove_all(old, ec);
+  stage.commit();
   sum.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return sum;
 }

@@ -269,12 +269,8 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
   std::error_code ec;
   if (fs::exists(out, ec) && !opt.overwrite)
     io::fail(out, "output directory already exists (choose another one, or overwrite: --force)");
-  fs::create_directories(out.parent_path(), ec);
-  if (ec) io::fail(out.parent_path(), io::cat("cannot create parent directory: ", ec.message()));
-  const fs::path tmp = detail::sibling(out, ".raw-tmp-", opt.seed);
-  fs::create_directories(tmp, ec);
-  if (ec) io::fail(tmp, io::cat("cannot create temporary output directory: ", ec.message()));
-  detail::TreeGuard guard{tmp};
+  io::StagedDirectory stage(out, ".raw-tmp-");
+  const fs::path& tmp = stage.dir();
 
   const SynthScene scene = make_scene(preset, opt.seed);
   RawSummary sum;
@@ -356,7 +352,10 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
         attrs.emplace_back("drone-dji:BlackLevel", detail::g10(black_level));
         attrs.emplace_back("drone-dji:SensorGain", detail::g10(e.gain()));
         std::string kv;
-        for (std::size_t i = 0; i < k.size(); ++i) kv += (i ? "," : "") + detail::g10(k[i]);
+        for (std::size_t i = 0; i < k.size(); ++i) {
+          if (i) kv += ',';
+          kv += detail::g10(k[i]);  // (not `"," + str`: GCC 12's -Wrestrict false positive)
+        }
         attrs.emplace_back("drone-dji:VignettingData", kv);
         attrs.emplace_back("drone-dji:CalibratedOpticalCenterX", detail::g10(vcx));
         attrs.emplace_back("drone-dji:CalibratedOpticalCenterY", detail::g10(vcy));
@@ -372,20 +371,7 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
       ++sum.files;
     }
   }
-  fs::path old;
-  if (fs::exists(out, ec)) {
-    old = detail::sibling(out, ".raw-old-", opt.seed + 1);
-    fs::rename(out, old, ec);
-    if (ec) io::fail(out, io::cat("cannot move the existing directory aside: ", ec.message()));
-  }
-  fs::rename(tmp, out, ec);
-  if (ec) {
-    std::error_code ec2;
-    if (!old.empty()) fs::rename(old, out, ec2);
-    io::fail(out, io::cat("cannot rename the finished folder into place: ", ec.message()));
-  }
-  guard.armed = false;
-  if (!old.empty()) fs::remove_all(old, ec);
+  stage.commit();
   sum.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return sum;
 }
