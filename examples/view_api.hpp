@@ -304,9 +304,26 @@ inline Image<float> render_values(const ModelSet& models, const Mode& m, const C
                                   const Background& bg) {
   require_mode(models, m);
   const std::vector<std::string> bands = m.bands();
+  // ModelSet renders bands in adjacent channels of one model in one forward pass. Fill the gaps
+  // between wanted bands of one model (RE between R and NIR for NDVI and CIR): rendering an extra
+  // channel is cheaper than a second projection and sort.
+  std::vector<std::string> all = bands;
+  for (const auto& sb : io::standard_bands()) {
+    const BandSource* s = models.named_source(sb.id);
+    if (!s || std::find(all.begin(), all.end(), sb.id) != all.end()) continue;
+    bool below = false, above = false;
+    for (const auto& b : bands) {
+      const BandSource* w = models.named_source(b);
+      if (!w || w->model != s->model) continue;
+      below = below || w->first_channel < s->first_channel;
+      above = above || w->first_channel > s->first_channel;
+    }
+    if (below && above) all.push_back(sb.id);
+  }
   std::vector<std::vector<float>> bgs;
-  for (const auto& b : bands) bgs.push_back(bg.for_band(b));
-  std::vector<Image<float>> imgs = models.render_bands(bands, cam, bgs);
+  for (const auto& b : all) bgs.push_back(bg.for_band(b));
+  std::vector<Image<float>> imgs = models.render_bands(all, cam, bgs);
+  imgs.resize(bands.size());  // the gap bands come last
   switch (m.kind) {
     case Mode::band:
     case Mode::rgb: return std::move(imgs[0]);

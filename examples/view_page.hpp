@@ -126,6 +126,7 @@ const cam = { pos: [0, 0, 0], right: [1, 0, 0], down: [0, 0, -1], fwd: [0, 1, 0]
               fxn: 1, fyn: 1, cxn: 0.5, cyn: 0.5, aspect: 0.75 };
 let up = [0, 0, 1], center = [0, 0, 0], radius = 1;
 let selected = -1;  // dataset camera shown in the compare panel
+let atCamera = -1;  // dataset camera the view sits at (until the user moves)
 
 function defaultIntrinsics(aspect) {
   cam.aspect = aspect;
@@ -174,7 +175,7 @@ function zoom(f) {
 }
 function move(v) { cam.pos = add(cam.pos, v); moved(); }
 function resetView() {
-  selected = -1;
+  selected = -1; atCamera = -1;
   if (info.cameras.length) { jump(info.cameras.findIndex(c => c.rendered) >= 0 ? info.cameras.findIndex(c => c.rendered) : 0, false); return; }
   defaultIntrinsics(0.75);
   let h = cross(up, [1, 0, 0]);
@@ -193,6 +194,7 @@ function jump(id, compare = true) {
   cam.fxn = c.fx / c.width; cam.fyn = c.fy / c.height; cam.cxn = c.cx / c.width; cam.cyn = c.cy / c.height;
   selected = id;
   highlightCamera();
+  atCamera = id;
   $("camInfo").textContent = `#${id} ${c.name}: ${c.band}, ${c.split}, ${c.width}x${c.height}, ` +
     `fx ${c.fx.toFixed(2)} fy ${c.fy.toFixed(2)} cx ${c.cx.toFixed(2)} cy ${c.cy.toFixed(2)}`;
   moved(true);
@@ -204,7 +206,7 @@ let version = 0, lastMove = 0, inflight = false, shown = { version: -1, full: fa
 const times = [];
 function moved(settled = false) {
   version++;
-  if (!settled) lastMove = performance.now();
+  if (!settled) { lastMove = performance.now(); atCamera = -1; }
   pump();
 }
 function renderSize(full) {
@@ -250,7 +252,7 @@ async function pump() {
     $("sFps").textContent = (1000 * times.length / times.reduce((a, b) => a + b, 0)).toFixed(1);
     $("sRes").textContent = `${r.headers.get("X-Width")}x${r.headers.get("X-Height")}${full ? "" : " (moving)"}`;
     $("sGauss").textContent = Number(r.headers.get("X-Gaussians")).toLocaleString();
-    $("badge").textContent = modeLabel(currentMode()) + (selected >= 0 ? ` · camera #${selected}` : "");
+    $("badge").textContent = modeLabel(currentMode()) + (atCamera >= 0 ? ` · camera #${atCamera}` : "");
     $("errmsg").textContent = "";
     shown = { version: v, full };
   } catch (e) {
@@ -291,7 +293,7 @@ async function showCompare(id) {
     $("cmpStats").textContent = (psnr ? `PSNR ${Number(psnr).toFixed(2)} dB` : mae ? `mean |index difference| ${Number(mae).toFixed(4)}` : "no ground truth") +
       ` · render ${rr.headers.get("X-Render-Ms")} ms · ${rr.headers.get("X-Width")}x${rr.headers.get("X-Height")}`;
     if (missing) $("cmpNote").textContent = missing;
-    else if (!c.band || currentMode() !== c.band)
+    else if (!(modeInfo(currentMode()).bands.length === 1 && modeInfo(currentMode()).bands[0] === c.band))
       $("cmpNote").textContent = "ground truth of other bands comes from the same capture's cameras (slightly different viewpoints)";
     await get("gt", $("cmpGt"));
     const er = await get("error", $("cmpErr"));
