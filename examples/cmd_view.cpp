@@ -147,7 +147,8 @@ void handle_frame(State& st, const httplib::Request& req, httplib::Response& res
 
   msgs::Image<float> shown;
   std::lock_guard<std::mutex> lock(st.render_mutex);
-  const std::string key = std::to_string(fi) + "|" + mode.id() + "|" + q.str("bg", "eval") + "|" + std::to_string(factor);
+  const std::string key =
+      std::to_string(fi) + "|" + mode.id() + "|" + q.str("bg", "eval") + "|" + std::to_string(factor);
   if (key != st.cached_key) {
     st.cached_key.clear();
     const auto t0 = std::chrono::steady_clock::now();

@@ -404,7 +404,8 @@ inline Camera<float> parse_camera(const Query& q) {
     if (!(fwd.norm() > 1e-9)) bad_request("eye and target must differ");
     const Eigen::Vector3d z = fwd.normalized();
     const Eigen::Vector3d x = z.cross(up);  // right = forward x up (OpenCV: y points down)
-    if (!(up.norm() > 1e-9) || !(x.norm() > 1e-6 * up.norm())) bad_request("up must not be parallel to the view direction");
+    if (!(up.norm() > 1e-9) || !(x.norm() > 1e-6 * up.norm()))
+      bad_request("up must not be parallel to the view direction");
     const Eigen::Vector3d xn = x.normalized(), y = z.cross(xn);
     Eigen::Matrix3d R;
     R.row(0) = xn.transpose();
@@ -515,7 +516,8 @@ inline int frame_factor(const Query& q, const io::Dataset& ds, const io::Frame& 
   }
   for (int s = std::max(1, ds.downscale);; ++s) {
     const Camera<float> c = io::frame_camera(ds, f, s);
-    if (c.width <= max_side && c.height <= max_side && std::size_t(c.width) * std::size_t(c.height) <= max_pixels) return s;
+    if (c.width <= max_side && c.height <= max_side && std::size_t(c.width) * std::size_t(c.height) <= max_pixels)
+      return s;
   }
 }
 
@@ -667,7 +669,10 @@ inline nlohmann::json info_json(const ModelSet& models, const io::Dataset* ds, c
   json bands = json::array();
   for (const auto& b : io::standard_bands())
     if (models.renders(b.id))
-      bands.push_back({{"id", b.id}, {"channels", b.channels}, {"centre_nm", b.centre_nm}, {"named", bool(models.named_source(b.id))}});
+      bands.push_back({{"id", b.id},
+                       {"channels", b.channels},
+                       {"centre_nm", b.centre_nm},
+                       {"named", models.named_source(b.id) != nullptr}});
   j["bands"] = bands;
   json modes = json::array();
   for (const auto& id : all_mode_ids()) {

@@ -69,7 +69,8 @@ ModelSet fake_models(const std::vector<std::vector<std::string>>& models_names, 
       const int n = rs.band_count < 0 ? int(vals.size()) - rs.band_first : rs.band_count;
       Image<float> img(cam.width, cam.height, n);
       for (std::size_t p = 0; p < img.pixels(); ++p)
-        for (int c = 0; c < n; ++c) img.data[p * std::size_t(n) + std::size_t(c)] = vals[std::size_t(rs.band_first + c)];
+        for (int c = 0; c < n; ++c)
+          img.data[p * std::size_t(n) + std::size_t(c)] = vals[std::size_t(rs.band_first + c)];
       return img;
     };
   });
@@ -201,7 +202,8 @@ TEST_CASE("parse_camera: intrinsics and both pose forms") {
 }
 
 TEST_CASE("parse_camera: every malformed camera is a 400") {
-  const std::initializer_list<std::string_view> all = {"width", "height", "fx", "fy", "cx", "cy", "fovy", "R", "t", "eye", "target", "up"};
+  const std::initializer_list<std::string_view> all = {"width", "height", "fx", "fy",  "cx",     "cy",
+                                                        "fovy",  "R",      "t",  "eye", "target", "up"};
   auto status = [&](std::initializer_list<std::pair<const char*, const char*>> kv) {
     return status_of([&] { (void)view::parse_camera(Query(params(kv), all)); });
   };
@@ -375,7 +377,8 @@ TEST_CASE("dataset frames: ground truth per mode, capture lookups and size check
   const view::Query none({}, {"scale"});
   CHECK(view::frame_factor(none, ds, ds.frames[d]) == std::max(1, ds.downscale));
   CHECK(view::frame_factor(view::Query(params({{"scale", "2"}}), {"scale"}), ds, ds.frames[d]) == 2);
-  CHECK(status_of([&] { (void)view::frame_factor(view::Query(params({{"scale", "65"}}), {"scale"}), ds, ds.frames[d]); }) == 400);
+  const view::Query too_far(params({{"scale", "65"}}), {"scale"});
+  CHECK(status_of([&] { (void)view::frame_factor(too_far, ds, ds.frames[d]); }) == 400);
 
   // compare_frame against a fake model painting constants: PSNR of a constant against the image.
   const ModelSet joint = fake_models({io::joint_channel_names()});

@@ -48,7 +48,8 @@ std::string slurp(const fs::path& p) {
 /// `msgs view ...` as a child process with stdout / stderr in files; SIGTERM on destruction.
 class ViewServer {
  public:
-  ViewServer(const std::vector<std::string>& args, const fs::path& dir) : out_(dir / "view.out"), err_(dir / "view.err") {
+  ViewServer(const std::vector<std::string>& args, const fs::path& dir)
+      : out_(dir / "view.out"), err_(dir / "view.err") {
     std::vector<std::string> argv = {MSGS_BIN, "view"};
     argv.insert(argv.end(), args.begin(), args.end());
     std::vector<char*> cargv;
@@ -222,7 +223,8 @@ TEST_CASE("msgs view: bad requests are 4xx, renders decode at their size, frames
       REQUIRE(res);
       REQUIRE(res->status == 200);
       const msgs::Image<float> mine = decode(res->body, dir / "frame.png");
-      const msgs::Image<float> ref = msgs::io::read_image(out / (fs::path(ds.frames[id].file_path).stem().string() + ".png"));
+      const fs::path ref_file = out / (fs::path(ds.frames[id].file_path).stem().string() + ".png");
+      const msgs::Image<float> ref = msgs::io::read_image(ref_file);
       REQUIRE(mine.width == ref.width);
       REQUIRE(mine.height == ref.height);
       REQUIRE(mine.channels == ref.channels);
