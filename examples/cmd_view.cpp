@@ -229,6 +229,13 @@ int run_view(const std::vector<std::string>& argv) {
   st.info = msgs::view::info_json(st.models, st.ds ? &*st.ds : nullptr, st.ds ? &st.frames : nullptr).dump();
 
   httplib::Server svr;
+  // httplib's default also sets SO_REUSEPORT, with which a second server (or another user's
+  // process) could bind the same port and take a share of the connections. SO_REUSEADDR alone
+  // still allows a quick restart on the port.
+  svr.set_socket_options([](socket_t sock) {
+    int yes = 1;
+    setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof yes);
+  });
   svr.set_payload_max_length(64 * 1024);  // nothing here takes a body
   svr.set_read_timeout(10, 0);
   svr.set_write_timeout(30, 0);

@@ -257,5 +257,18 @@ TEST_CASE("msgs view: bad requests are 4xx, renders decode at their size, frames
     CHECK(std::stod(idx->get_header_value("X-MAE")) >= 0.0);
   }
 
+  SUBCASE("a second server on the same port fails instead of sharing it") {
+    const std::string cmd = "timeout 30 " + std::string(MSGS_BIN) + " view --model '" + model.string() +
+                            "' --port " + std::to_string(server.port()) + " > '" + (dir / "second.log").string() +
+                            "' 2>&1";
+    const int rc = std::system(cmd.c_str());
+    CHECK(WIFEXITED(rc));
+    CHECK(WEXITSTATUS(rc) == 1);
+    CHECK(slurp(dir / "second.log").find("cannot listen") != std::string::npos);
+    const auto still = cli.Get("/api/info");
+    REQUIRE(still);
+    CHECK(still->status == 200);
+  }
+
   CHECK(server.stop() == 0);  // SIGTERM shuts down cleanly
 }
