@@ -49,13 +49,11 @@ struct ExposureConfig {
   double eps = 1e-15;
   float max_log_gain = 4.0f;   ///< |log g| <= this after every update (g in [e^-4, e^4])
   float max_offset = 1.0f;     ///< |b| <= this after every update (images live in [0, 1])
-  double gauge_weight = 1.0;   ///< w of the gauge penalty of add_gauge_group
 
   void validate() const {
     if (!(std::isfinite(lr) && lr >= 0)) throw std::invalid_argument("exposure: learning rate must be finite and >= 0, got " + std::to_string(lr));
     if (!(beta1 >= 0 && beta1 < 1 && beta2 >= 0 && beta2 < 1)) throw std::invalid_argument("exposure: Adam betas must be in [0, 1)");
     if (!(eps > 0 && std::isfinite(eps))) throw std::invalid_argument("exposure: Adam eps must be finite and > 0");
-    if (!(std::isfinite(gauge_weight) && gauge_weight >= 0)) throw std::invalid_argument("exposure: gauge_weight must be finite and >= 0");
     if (!(max_log_gain > 0 && std::isfinite(max_log_gain)) || !(max_offset >= 0 && std::isfinite(max_offset)))
       throw std::invalid_argument("exposure: max_log_gain must be finite and > 0, max_offset finite and >= 0");
   }
@@ -186,32 +184,9 @@ class Exposure {
       st_.channels.push_back(c);
       st_.steps.push_back(0);
       first_.push_back(st_.log_gain.size());
-      group_.push_back(-1);
       for (int i = 0; i < c; ++i)
         for (auto* v : {&st_.log_gain, &st_.offset, &st_.m_log_gain, &st_.v_log_gain, &st_.m_offset, &st_.v_offset}) v->push_back(0.0f);
     }
-  }
-
-  /// Tie the gauge of a group of images (the training images of one band): a penalty
-  /// (w / 2) n mean² on the group's mean log-gain and mean offset per channel (w = gauge_weight)
-  /// pulls both towards 0; its gradient, w * mean, joins each image's own when it is stepped, so a
-  /// step still updates one image. The affine correction has a free overall scale (every gain times
-  /// s and every colour of the model divided by s render the same); without the penalty the gains
-  /// of all images drift together and the model's colours with them, and renders of new views
-  /// (eval, which has no learned correction) carry the drift. With it the model keeps the images'
-  /// average radiometry. Costs O(group size) per step. The images of a group must have the same
-  /// channel count and belong to no other group.
-  void add_gauge_group(const std::vector<std::size_t>& frames) {
-    std::vector<std::size_t> slots;
-    for (std::size_t f : frames) {
-      const std::size_t k = slot(f);
-      if (group_[k] >= 0) throw std::invalid_argument("Exposure: frame " + std::to_string(f) + " is in two gauge groups");
-      if (!slots.empty() && st_.channels[k] != st_.channels[slots.front()])
-        throw std::invalid_argument("Exposure: a gauge group mixes channel counts");
-      slots.push_back(k);
-    }
-    for (std::size_t k : slots) group_[k] = std::int64_t(groups_.size());
-    groups_.push_back(std::move(slots));
   }
 
   const ExposureConfig& config() const { return cfg_; }
@@ -278,10 +253,6 @@ class Exposure {
     const std::size_t n = std::size_t(st_.channels[k]);
     for (std::size_t c = 0; c < n; ++c)
       if (!std::isfinite(dg[c]) || !std::isfinite(db[c])) return;  // NaN never enters the state
-    // Gauge penalty w/2 * n * (mean^2) per channel over the group, for log-gain and offset: its
-    // gradient w.r.t. this image's parameter is w * mean (see add_gauge_group).
-    double pg[8] = {}, pb[8] = {};
-    if (group_[k] >= 0) group_mean(groups_[std::size_t(group_[k])], n, pg, pb);
     const std::int64_t t = ++st_.steps[k];
     const double bc1 = 1.0 - std::pow(cfg_.beta1, double(t)), bc2 = 1.0 - std::pow(cfg_.beta2, double(t));
     auto update = [&](float& x, float& m, float& v, double grad, float lim) {
@@ -295,18 +266,8 @@ class Exposure {
     };
     for (std::size_t c = 0; c < n; ++c) {
       const std::size_t i = first_[k] + c;
-      update(st_.log_gain[i], st_.m_log_gain[i], st_.v_log_gain[i], dg[c] + cfg_.gauge_weight * pg[c], cfg_.max_log_gain);
-      update(st_.offset[i], st_.m_offset[i], st_.v_offset[i], db[c] + cfg_.gauge_weight * pb[c], cfg_.max_offset);
-    }
-  }
-
-  /// The group's mean log-gain and offset per channel (summed in double in a fixed order).
-  void group_mean(const std::vector<std::size_t>& slots, std::size_t n, double* mg, double* mb) const {
-    for (std::size_t c = 0; c < n; ++c) {
-      double sg = 0, sb = 0;
-      for (std::size_t k : slots) { sg += double(st_.log_gain[first_[k] + c]); sb += double(st_.offset[first_[k] + c]); }
-      mg[c] = sg / double(slots.size());
-      mb[c] = sb / double(slots.size());
+      update(st_.log_gain[i], st_.m_log_gain[i], st_.v_log_gain[i], dg[c], cfg_.max_log_gain);
+      update(st_.offset[i], st_.m_offset[i], st_.v_offset[i], db[c], cfg_.max_offset);
     }
   }
 
@@ -314,8 +275,6 @@ class Exposure {
   ExposureState st_;
   std::vector<std::int64_t> slot_;   ///< per dataset frame: index into st_.frames, or -1
   std::vector<std::size_t> first_;   ///< per image: first value in the per-channel arrays
-  std::vector<std::int64_t> group_;  ///< per image: its gauge group, or -1
-  std::vector<std::vector<std::size_t>> groups_;  ///< images (slots) of each gauge group
 };
 
 // ---------------------------------------------------------------------------------------------
