@@ -184,9 +184,32 @@ class Exposure {
       st_.channels.push_back(c);
       st_.steps.push_back(0);
       first_.push_back(st_.log_gain.size());
+      group_.push_back(-1);
       for (int i = 0; i < c; ++i)
         for (auto* v : {&st_.log_gain, &st_.offset, &st_.m_log_gain, &st_.v_log_gain, &st_.m_offset, &st_.v_offset}) v->push_back(0.0f);
     }
+  }
+
+  /// Fix the gauge of a group of images (the training images of one band): after every update of
+  /// one of them, the group's mean log-gain and mean offset per channel are subtracted from each of
+  /// them (a projected Adam step), so both means stay 0. The affine correction has a free common
+  /// scale (every gain times s and every colour of the model divided by s render the same): left
+  /// free, the gains of all images drift together, the model's brightness drifts the other way and
+  /// every render of a new view (eval, `msgs render`) carries it. With the group's mean held at
+  /// the identity, the model keeps the images' average radiometry and each gain says how much
+  /// brighter than that average its image is. Costs O(group size) per step. The images of a group
+  /// must have the same channel count and belong to no other group.
+  void add_gauge_group(const std::vector<std::size_t>& frames) {
+    std::vector<std::size_t> slots;
+    for (std::size_t f : frames) {
+      const std::size_t k = slot(f);
+      if (group_[k] >= 0) throw std::invalid_argument("Exposure: frame " + std::to_string(f) + " is in two gauge groups");
+      if (!slots.empty() && st_.channels[k] != st_.channels[slots.front()])
+        throw std::invalid_argument("Exposure: a gauge group mixes channel counts");
+      slots.push_back(k);
+    }
+    for (std::size_t k : slots) group_[k] = std::int64_t(groups_.size());
+    groups_.push_back(std::move(slots));
   }
 
   const ExposureConfig& config() const { return cfg_; }
@@ -269,12 +292,32 @@ class Exposure {
       update(st_.log_gain[i], st_.m_log_gain[i], st_.v_log_gain[i], dg[c], cfg_.max_log_gain);
       update(st_.offset[i], st_.m_offset[i], st_.v_offset[i], db[c], cfg_.max_offset);
     }
+    if (group_[k] >= 0) recentre(groups_[std::size_t(group_[k])], n);
+  }
+
+  /// Subtract the group's mean log-gain and offset per channel from each of its images (summed in
+  /// double in a fixed order: deterministic).
+  void recentre(const std::vector<std::size_t>& slots, std::size_t n) {
+    for (std::vector<float>* v : {&st_.log_gain, &st_.offset}) {
+      const float lim = v == &st_.log_gain ? cfg_.max_log_gain : cfg_.max_offset;
+      for (std::size_t c = 0; c < n; ++c) {
+        double mean = 0;
+        for (std::size_t k : slots) mean += double((*v)[first_[k] + c]);
+        mean /= double(slots.size());
+        for (std::size_t k : slots) {
+          float& x = (*v)[first_[k] + c];
+          x = std::clamp(float(double(x) - mean), -lim, lim);
+        }
+      }
+    }
   }
 
   ExposureConfig cfg_{};
   ExposureState st_;
   std::vector<std::int64_t> slot_;   ///< per dataset frame: index into st_.frames, or -1
   std::vector<std::size_t> first_;   ///< per image: first value in the per-channel arrays
+  std::vector<std::int64_t> group_;  ///< per image: its gauge group (add_gauge_group), or -1
+  std::vector<std::vector<std::size_t>> groups_;  ///< the images (slots) of each gauge group
 };
 
 // ---------------------------------------------------------------------------------------------

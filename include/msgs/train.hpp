@@ -174,6 +174,7 @@ class Trainer {
       ExposureConfig ec;
       ec.lr = opt_.lr_exposure;
       exposure_ = Exposure(ds.frames.size(), std::move(frames), ec);
+      for (const auto& b : bands_) exposure_.add_gauge_group(b.train_frames);  // mean log-gain and offset 0
     }
   }
 
