@@ -139,26 +139,13 @@ inline RawExposure raw_exposure(std::uint64_t seed, int capture, int band) {
 
 namespace detail {
 
-/// Linear radiance of one Spectrum channel, traced like render_band (same jitter pattern), not clamped.
+/// Linear radiance of one Spectrum channel, traced like render_band (same jitter), not clamped.
 inline Image<float> render_radiance(const SynthScene& s, const Camera<float>& cam, int channel, const RenderSettings& rs) {
   cam.validate();
-  const int aa = std::max(1, rs.aa);
   Image<float> img(cam.width, cam.height, 1);
-  const float inv = 1.f / float(aa * aa);
 #pragma omp parallel for schedule(dynamic, 1)
   for (int y = 0; y < cam.height; ++y)
-    for (int x = 0; x < cam.width; ++x) {
-      float acc = 0.f;
-      for (int sy = 0; sy < aa; ++sy)
-        for (int sx = 0; sx < aa; ++sx) {
-          const std::uint64_t h = hash_tuple(rs.jitter_seed, x, y, sx, sy);
-          const float jx = (float(sx) + hash_to_unit(h)) / float(aa);
-          const float jy = (float(sy) + hash_to_unit(splitmix64(h))) / float(aa);
-          const Ray ray = camera_ray(cam, float(x) + jx, float(y) + jy);
-          acc += shade(s, ray, trace(s, ray))[static_cast<std::size_t>(channel)];
-        }
-      img.at(x, y, 0) = acc * inv;
-    }
+    for (int x = 0; x < cam.width; ++x) img.at(x, y, 0) = pixel_spectrum(s, cam, x, y, rs)[static_cast<std::size_t>(channel)];
   return img;
 }
 

@@ -45,30 +45,37 @@ inline float band_value(const Spectrum& radiance, Band b, int channel) {
   return std::clamp(v, 0.f, 1.f);
 }
 
+/// Radiance of pixel (x, y): the mean over rs.aa x rs.aa jittered rays, the jitter a hash of
+/// (rs.jitter_seed, x, y, sample), accumulated per spectrum channel in float in sample order.
+inline Spectrum pixel_spectrum(const SynthScene& s, const Camera<float>& cam, int x, int y, const RenderSettings& rs) {
+  const int aa = std::max(1, rs.aa);
+  Spectrum acc{};
+  for (int sy = 0; sy < aa; ++sy)
+    for (int sx = 0; sx < aa; ++sx) {
+      const std::uint64_t h = hash_tuple(rs.jitter_seed, x, y, sx, sy);
+      const float jx = (float(sx) + hash_to_unit(h)) / float(aa);
+      const float jy = (float(sy) + hash_to_unit(splitmix64(h))) / float(aa);
+      const Ray ray = camera_ray(cam, float(x) + jx, float(y) + jy);
+      const Spectrum L = shade(s, ray, trace(s, ray));
+      for (std::size_t c = 0; c < acc.size(); ++c) acc[c] += L[c];
+    }
+  const float inv = 1.f / float(aa * aa);
+  for (float& v : acc) v *= inv;
+  return acc;
+}
+
 /// Ray-trace one band's image with `cam` ([H, W, C], C = band_channels(b)). Averaging happens in
 /// linear radiance before the sRGB encoding, like a real sensor. Every pixel seeds its own
 /// jitter from (seed, x, y), so the result does not depend on the thread count.
 inline Image<float> render_band(const SynthScene& s, const Camera<float>& cam, Band b,
                                 const RenderSettings& rs = {}) {
   cam.validate();
-  const int C = band_channels(b), off = band_offset(b), aa = std::max(1, rs.aa);
+  const int C = band_channels(b);
   Image<float> img(cam.width, cam.height, C);
-  const float inv = 1.f / float(aa * aa);
 #pragma omp parallel for schedule(dynamic, 1)
   for (int y = 0; y < cam.height; ++y) {
     for (int x = 0; x < cam.width; ++x) {
-      float acc[3] = {0.f, 0.f, 0.f};
-      for (int sy = 0; sy < aa; ++sy)
-        for (int sx = 0; sx < aa; ++sx) {
-          const std::uint64_t h = hash_tuple(rs.jitter_seed, x, y, sx, sy);
-          const float jx = (float(sx) + hash_to_unit(h)) / float(aa);
-          const float jy = (float(sy) + hash_to_unit(splitmix64(h))) / float(aa);
-          const Ray ray = camera_ray(cam, float(x) + jx, float(y) + jy);
-          const Spectrum L = shade(s, ray, trace(s, ray));
-          for (int c = 0; c < C; ++c) acc[c] += L[static_cast<std::size_t>(off + c)];
-        }
-      Spectrum mean{};
-      for (int c = 0; c < C; ++c) mean[static_cast<std::size_t>(off + c)] = acc[c] * inv;
+      const Spectrum mean = pixel_spectrum(s, cam, x, y, rs);
       for (int c = 0; c < C; ++c) img.at(x, y, c) = band_value(mean, b, c);
     }
   }
