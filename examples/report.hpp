@@ -76,20 +76,18 @@ inline nlohmann::json metrics_json(const std::vector<BandMetrics>& metrics) {
   nlohmann::json j = nlohmann::json::object();
   for (const auto& b : metrics) {
     nlohmann::json e;
-    e["psnr"] = b.psnr;
-    e["ssim"] = b.ssim;
-    e["psnr_mean"] = BandMetrics::mean(b.psnr);
-    e["psnr_std"] = BandMetrics::stddev(b.psnr);
-    e["ssim_mean"] = BandMetrics::mean(b.ssim);
-    e["ssim_std"] = BandMetrics::stddev(b.ssim);
+    // "<name>", "<name>_mean", "<name>_std" of one per-image list.
+    auto put = [&e](const std::string& name, const std::vector<double>& v) {
+      e[name] = v;
+      e[name + "_mean"] = BandMetrics::mean(v);
+      e[name + "_std"] = BandMetrics::stddev(v);
+    };
+    put("psnr", b.psnr);
+    put("ssim", b.ssim);
     e["images"] = b.psnr.size();
     if (!b.psnr_cc.empty()) {  // exposure runs: colour-corrected (least-squares affine per image and channel)
-      e["psnr_cc"] = b.psnr_cc;
-      e["ssim_cc"] = b.ssim_cc;
-      e["psnr_cc_mean"] = BandMetrics::mean(b.psnr_cc);
-      e["psnr_cc_std"] = BandMetrics::stddev(b.psnr_cc);
-      e["ssim_cc_mean"] = BandMetrics::mean(b.ssim_cc);
-      e["ssim_cc_std"] = BandMetrics::stddev(b.ssim_cc);
+      put("psnr_cc", b.psnr_cc);
+      put("ssim_cc", b.ssim_cc);
     }
     j[b.band] = e;
   }
