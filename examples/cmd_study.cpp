@@ -21,6 +21,8 @@
 #include <msgs/io/file.hpp>
 #include <msgs/study.hpp>
 
+#include "study_convergence.hpp"
+
 #include "commands.hpp"
 #include "data_options.hpp"
 #include "experiment.hpp"
@@ -34,9 +36,10 @@ namespace fs = std::filesystem;
 namespace st = msgs::study;
 
 constexpr const char* kUsage =
-    "usage: msgs study ablation|crosstalk|cost --data DIR --out DIR [--scale F] [--jobs N]\n"
+    "usage: msgs study ablation|crosstalk|cost|convergence --data DIR --out DIR [--scale F] [--jobs N]\n"
     "                  [--sh-degree D] [--seed S] [--resume] [--job-file PATH] [--msgs PATH] [--no-plot]\n"
     "                  [--images NAME] [--eval-every N] [--geometry-band ID]\n"
+    "                  convergence: [--strategies LIST] [--presets LIST] [--eval-every-seconds T]\n"
     "       msgs study collect --out DIR [--no-plot]\n"
     "\n"
     "Studies over many training runs (every run is `msgs train` with one configuration):\n"
@@ -44,6 +47,10 @@ constexpr const char* kUsage =
     "  crosstalk  Joint-Optimized on RGB plus each of the 16 subsets of G, R, RE, NIR\n"
     "  cost       accuracy against time per quality knob around Joint-Optimized at scale F:\n"
     "             SH degree 0..3, scale F/4..2F, strategy, Joint modifiers, band count 1..5\n"
+    "  convergence  quality against training time: each strategy of --strategies with each preset\n"
+    "             of --presets at scale F, evaluated every T seconds of training; writes\n"
+    "             convergence.md (final table, where each pair of All curves crosses),\n"
+    "             convergence.csv and curves_<band>.png (PSNR against training seconds)\n"
     "  collect    rebuild the tables of DIR from DIR/study.json and DIR/runs/*/result.json\n"
     "\n"
     "Writes into DIR: study.json (the run list), runs/<id>/ (result.json, metrics.md, model PLYs,\n"
@@ -62,7 +69,10 @@ constexpr const char* kUsage =
     "  --job-file PATH write one `msgs train` command line per run to PATH instead of running, plus\n"
     "                  PATH's stem + _slurm.sh (a Slurm array script); then `msgs study collect`\n"
     "  --msgs PATH     msgs executable named in the job file (default: this executable)\n"
-    "  --no-plot       do not call gnuplot (the .gp script is still written)\n";
+    "  --no-plot       do not call gnuplot (the .gp script is still written)\n"
+    "  --strategies L  convergence: comma-separated strategies (default separate,split,joint,joint-optimized)\n"
+    "  --presets L     convergence: comma-separated presets, reference and/or fast (default reference)\n"
+    "  --eval-every-seconds T  convergence: anytime evaluation period in training seconds (default 10)\n";
 
 std::atomic<bool> g_stop{false};
 void on_sigint(int) { g_stop.store(true); }
@@ -100,12 +110,22 @@ int write_summaries(const fs::path& out, bool plot) {
   for (const auto& r : rows)
     if (!r.found) { ++missing; std::printf("missing: %s (%s)\n", r.run.id.c_str(), r.error.c_str()); }
   std::printf("wrote %s/summary.{csv,md,json} and %s.gp\n", out.string().c_str(), prefix.c_str());
+  std::vector<std::string> scripts = {prefix};
+  if (kind == st::StudyKind::Convergence) {
+    (void)msgs::cli::write_convergence_report(out, rows);
+    std::printf("%s", msgs::io::read_text(out / "convergence.md").c_str());
+    std::printf("wrote %s/convergence.{md,csv,gp}\n", out.string().c_str());
+    scripts.push_back("convergence");
+  }
   if (plot) {
     if (have_gnuplot()) {
-      const std::string cmd = "cd " + msgs::study::detail::shell_quote(out.string()) + " && gnuplot " +
-                              msgs::study::detail::shell_quote(prefix + ".gp");
-      if (std::system(cmd.c_str()) != 0) std::fprintf(stderr, "msgs study: gnuplot failed on %s.gp\n", prefix.c_str());
-      else std::printf("plots: %s/%s_<All|RGB|G|R|RE|NIR>.png\n", out.string().c_str(), prefix.c_str());
+      for (const auto& sc : scripts) {
+        const std::string cmd = "cd " + msgs::study::detail::shell_quote(out.string()) + " && gnuplot " +
+                                msgs::study::detail::shell_quote(sc + ".gp");
+        if (std::system(cmd.c_str()) != 0) std::fprintf(stderr, "msgs study: gnuplot failed on %s.gp\n", sc.c_str());
+      }
+      std::printf("plots: %s/%s_<All|RGB|G|R|RE|NIR>.png%s\n", out.string().c_str(), prefix.c_str(),
+                  kind == st::StudyKind::Convergence ? " and curves_<All|RGB|...>.png" : "");
     } else {
       std::printf("gnuplot not found (Debian: apt-get install gnuplot-nox); plot later with: cd %s && gnuplot %s.gp\n",
                   out.string().c_str(), prefix.c_str());
@@ -155,10 +175,12 @@ void write_run_result(const fs::path& dir, const msgs::RunResult& res, const st:
   j["transform"] = std::vector<float>(ds.transform.data(), ds.transform.data() + 16);
   j["threads"] = threads;
   j["study_id"] = r.id;
+  j["preset"] = r.preset;
   nlohmann::json labels = nlohmann::json::array();
   for (const auto& l : r.labels) labels.push_back({{"knob", l.knob}, {"value", l.value}});
   j["labels"] = labels;
   msgs::io::write_text_atomic(dir / "metrics.md", "# " + res.strategy + "\n\n" + msgs::cli::metrics_markdown(res.metrics));
+  if (!res.curve.empty()) msgs::io::write_text_atomic(dir / "curve.csv", msgs::cli::curve_csv(res));
   msgs::io::write_text_atomic(dir / "result.json", j.dump(2) + "\n");  // last: its presence marks the run done
 }
 
@@ -170,7 +192,7 @@ bool finished(const fs::path& dir) {
 
 int run_study(const std::vector<std::string>& argv) {
   const msgs::cli::Args args(argv, {"data", "images", "eval-every", "geometry-band", "out", "scale", "jobs", "sh-degree", "seed",
-                              "job-file", "msgs"},
+                              "job-file", "msgs", "strategies", "presets", "eval-every-seconds"},
                              {"help", "resume", "no-plot", "quiet"});
   if (args.flag("help") || args.positional().empty()) { std::fputs(kUsage, stdout); return args.flag("help") ? 0 : 2; }
   if (args.positional().size() > 1) throw msgs::cli::UsageError("unexpected argument '" + args.positional()[1] + "'");
@@ -183,7 +205,7 @@ int run_study(const std::vector<std::string>& argv) {
   try {
     kind = st::parse_study_kind(what);
   } catch (const std::invalid_argument&) {
-    throw msgs::cli::UsageError("unknown study '" + what + "' (ablation, crosstalk, cost or collect)");
+    throw msgs::cli::UsageError("unknown study '" + what + "' (ablation, crosstalk, cost, convergence or collect)");
   }
   if (kind == st::StudyKind::Runs) throw msgs::cli::UsageError("'runs' is not a study to run; use collect");
   st::StudyOptions opt;
@@ -195,6 +217,12 @@ int run_study(const std::vector<std::string>& argv) {
   const long seed = args.integer("seed", 0);
   if (seed < 0) throw msgs::cli::UsageError("--seed must be >= 0");
   opt.seed = std::uint64_t(seed);
+  if (kind != st::StudyKind::Convergence)
+    for (const char* k : {"strategies", "presets", "eval-every-seconds"})
+      if (args.has(k)) throw msgs::cli::UsageError(std::string("--") + k + " belongs to the convergence study");
+  if (args.has("strategies")) opt.strategies = msgs::cli::split_list(args.get("strategies"));
+  if (args.has("presets")) opt.presets = msgs::cli::split_list(args.get("presets"));
+  opt.curve_seconds = args.number("eval-every-seconds", opt.curve_seconds);
   const long jobs = args.integer("jobs", 1);
   if (jobs < 1) throw msgs::cli::UsageError("--jobs must be >= 1");
   const fs::path data = fs::absolute(args.require("data"));
@@ -203,7 +231,12 @@ int run_study(const std::vector<std::string>& argv) {
     if (args.has(k)) { data_args.push_back(std::string("--") + k); data_args.push_back(args.get(k)); }
   const std::string geometry_band = args.get("geometry-band", "D");
 
-  const std::vector<st::StudyRun> runs = st::study_runs(kind, opt);
+  std::vector<st::StudyRun> runs;
+  try {
+    runs = st::study_runs(kind, opt);
+  } catch (const std::invalid_argument& e) {
+    throw msgs::cli::UsageError(e.what());
+  }
   fs::create_directories(out);
   msgs::io::write_text_atomic(out / "study.json", st::manifest_json(kind, opt, data, runs).dump(2) + "\n");
 
@@ -252,6 +285,8 @@ int run_study(const std::vector<std::string>& argv) {
           cfg.scale = r.scale;
           cfg.bands = r.bands;
           cfg.geometry_band = geometry_band;
+          msgs::apply_preset(msgs::parse_preset(r.preset), cfg.train, r.scale);
+          cfg.train.curve.every_seconds = r.curve_seconds;
           cfg.train.seed = r.seed;
           cfg.init.seed = std::uint32_t(r.seed);
           cfg.train.stop = &g_stop;

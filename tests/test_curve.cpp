@@ -6,7 +6,6 @@
 #include "fixtures.hpp"
 
 #include <msgs/curve.hpp>
-#include <msgs/presets.hpp>
 
 #include <cmath>
 #include <filesystem>
@@ -110,32 +109,4 @@ TEST_CASE("curve file: round trip, and a malformed file is an error naming file 
   std::ofstream(dir / "bad2.curve") << "clock,abc\n";
   CHECK_THROWS_AS(load_curve(dir / "bad2.curve"), io::IoError);
   CHECK_THROWS_AS(load_curve(dir / "missing.curve"), io::IoError);
-}
-
-TEST_CASE("presets: reference is TrainOptions{}, fast names and applies its departures") {
-  TrainOptions t;
-  t.clamp_render = false;
-  t.sparse = true;
-  apply_preset(Preset::reference, t, 0.025);
-  const TrainOptions ref;
-  CHECK(t.clamp_render);
-  CHECK(t.shuffle == Shuffle::every_pass);
-  CHECK(t.loss.ssim_border == SsimBorder::valid);
-  CHECK(t.eval_ssim == SsimBorder::valid);
-  CHECK_FALSE(t.sparse);
-  CHECK(t.adam.lr_sh_dc == ref.adam.lr_sh_dc);
-  CHECK(preset_departures(Preset::reference, 0.025).empty());
-
-  apply_preset(Preset::fast, t, 0.025);
-  CHECK(t.adam.lr_sh_dc == doctest::Approx(0.01));
-  CHECK(t.sparse);
-  CHECK(t.spectral_colour_init);
-  CHECK(t.clamp_render);  // the parity switches stay the reference's
-  CHECK(preset_departures(Preset::fast, 0.025).size() == 3);
-  CHECK(fast_lr_sh_dc(0.4) == doctest::Approx(0.0025));
-  CHECK(fast_lr_sh_dc(1.0) == doctest::Approx(0.0025));
-  CHECK(fast_lr_sh_dc(1e-4) == doctest::Approx(0.025));  // at most 10x
-  CHECK(parse_preset("fast") == Preset::fast);
-  CHECK_THROWS_AS(parse_preset("quick"), std::invalid_argument);
-  CHECK_THROWS_AS(fast_lr_sh_dc(0.0), std::invalid_argument);
 }

@@ -14,7 +14,6 @@
 #include <vector>
 
 #include "schedule.hpp"
-#include "train.hpp"
 
 namespace msgs {
 
@@ -56,10 +55,11 @@ inline std::vector<PresetDeparture> preset_departures(Preset p, double scale) {
   };
 }
 
-/// Set the options `p` decides in `t`, for a run at schedule scale `scale`. Call it on fresh
-/// options, then apply any explicit user choice on top.
-inline void apply_preset(Preset p, TrainOptions& t, double scale) {
-  const TrainOptions ref;
+/// Set the options `p` decides in `t` (a TrainOptions, train.hpp), for a run at schedule scale
+/// `scale`. Call it on fresh options, then apply any explicit user choice on top.
+template <class Options>
+void apply_preset(Preset p, Options& t, double scale) {
+  const Options ref{};
   t.loss.ssim_border = ref.loss.ssim_border;
   t.clamp_render = ref.clamp_render;
   t.shuffle = ref.shuffle;

@@ -20,6 +20,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "presets.hpp"
+
 #include "io/dataset.hpp"
 #include "io/error.hpp"
 #include "io/file.hpp"
@@ -28,13 +30,14 @@
 namespace msgs::study {
 
 /// The studies `msgs study` knows.
-enum class StudyKind { Ablation, Crosstalk, Cost, Runs };
+enum class StudyKind { Ablation, Crosstalk, Cost, Convergence, Runs };
 
 inline const char* to_string(StudyKind k) {
   switch (k) {
     case StudyKind::Ablation: return "ablation";
     case StudyKind::Crosstalk: return "crosstalk";
     case StudyKind::Cost: return "cost";
+    case StudyKind::Convergence: return "convergence";
     case StudyKind::Runs: return "runs";
   }
   return "?";
@@ -42,9 +45,9 @@ inline const char* to_string(StudyKind k) {
 
 /// "ablation" -> StudyKind::Ablation; std::invalid_argument otherwise.
 inline StudyKind parse_study_kind(std::string_view s) {
-  for (StudyKind k : {StudyKind::Ablation, StudyKind::Crosstalk, StudyKind::Cost, StudyKind::Runs})
+  for (StudyKind k : {StudyKind::Ablation, StudyKind::Crosstalk, StudyKind::Cost, StudyKind::Convergence, StudyKind::Runs})
     if (s == to_string(k)) return k;
-  throw std::invalid_argument("unknown study '" + std::string(s) + "'; valid: ablation, crosstalk, cost, runs");
+  throw std::invalid_argument("unknown study '" + std::string(s) + "'; valid: ablation, crosstalk, cost, convergence, runs");
 }
 
 /// Band ids in the paper's column order; "All" (mean over the trained bands) comes first in tables.
@@ -82,6 +85,8 @@ struct StudyRun {
   std::vector<std::string> bands;  ///< bands to train, standard order; empty = every band
   std::uint64_t seed = 0;
   std::vector<Label> labels;
+  std::string preset = "reference";  ///< training preset (presets.hpp)
+  double curve_seconds = 0;          ///< anytime evaluation every this many training seconds (0: off)
 };
 
 /// Shared settings of a study's runs.
@@ -89,6 +94,10 @@ struct StudyOptions {
   double scale = 0.01;     ///< schedule scale F of the study (the cost study varies it around F)
   int sh_degree = 3;
   std::uint64_t seed = 0;
+  /// Convergence study: the strategies and presets crossed, and the anytime evaluation's period.
+  std::vector<std::string> strategies = {"separate", "split", "joint", "joint-optimized"};
+  std::vector<std::string> presets = {"reference"};
+  double curve_seconds = 10;
 };
 
 namespace detail {
@@ -127,6 +136,7 @@ inline std::string make_run_id(const StudyRun& r) {
   std::string id = r.strategy + "_sh" + std::to_string(r.sh_degree) + "_x" + detail::format_number(r.scale) + "_";
   id += r.bands.empty() ? std::string("all") : detail::join(r.bands, "+");
   if (r.seed != 0) id += "_seed" + std::to_string(r.seed);
+  if (r.preset != "reference") id += "_" + r.preset;
   return id;
 }
 
@@ -211,12 +221,34 @@ inline std::vector<StudyRun> cost_runs(const StudyOptions& o) {
   return runs;
 }
 
+/// Quality against training time: every strategy of `o.strategies` with every preset of
+/// `o.presets` at scale F on every band, each with the anytime evaluation every o.curve_seconds.
+/// Labelled ("run", "<strategy>" or "<strategy> (<preset>)").
+inline std::vector<StudyRun> convergence_runs(const StudyOptions& o) {
+  std::vector<StudyRun> runs;
+  if (!(o.curve_seconds > 0) || !std::isfinite(o.curve_seconds))
+    throw std::invalid_argument("convergence study: the evaluation period must be > 0 seconds");
+  for (const std::string& preset : o.presets) {
+    (void)parse_preset(preset);
+    for (const std::string& strat : o.strategies) {
+      StudyRun r{"", strat, o.scale, o.sh_degree, {}, o.seed, {}};
+      const std::string name = parse_strategy(strat).plan.name == "joint+specdelay+msad" ? "joint-optimized" : parse_strategy(strat).plan.name;
+      r.labels = {{"run", o.presets.size() > 1 ? name + " (" + preset + ")" : name}};
+      r.preset = preset;
+      r.curve_seconds = o.curve_seconds;
+      add_run(runs, std::move(r));
+    }
+  }
+  return runs;
+}
+
 /// The run list of a study kind (StudyKind::Runs has none: it only collects).
 inline std::vector<StudyRun> study_runs(StudyKind k, const StudyOptions& o) {
   switch (k) {
     case StudyKind::Ablation: return ablation_runs(o);
     case StudyKind::Crosstalk: return crosstalk_runs(o);
     case StudyKind::Cost: return cost_runs(o);
+    case StudyKind::Convergence: return convergence_runs(o);
     case StudyKind::Runs: return {};
   }
   return {};
@@ -561,7 +593,7 @@ inline nlohmann::json summary_json(StudyKind kind, const std::vector<RunSummary>
 inline std::string summary_markdown(StudyKind kind, const std::vector<RunSummary>& rows) {
   std::string out;
   const bool paper = kind == StudyKind::Ablation || kind == StudyKind::Crosstalk;
-  if (kind == StudyKind::Cost || kind == StudyKind::Runs) {
+  if (kind == StudyKind::Cost || kind == StudyKind::Convergence || kind == StudyKind::Runs) {
     const std::vector<bool> front = pareto_flags(rows);
     out += "| knob | value | PSNR All | RGB | G | R | RE | NIR | SSIM All | seconds | Gaussians | Pareto |\n";
     out += "|---|---|---|---|---|---|---|---|---|---|---|---|\n";
@@ -708,6 +740,8 @@ inline std::vector<std::string> train_arguments(const StudyRun& r, const std::fi
                                 "--strategy", r.strategy, "--scale", detail::format_number(r.scale, "%.17g"),
                                 "--sh-degree", std::to_string(r.sh_degree), "--seed", std::to_string(r.seed)};
   if (!r.bands.empty()) { a.push_back("--bands"); a.push_back(detail::join(r.bands, ",")); }
+  if (r.preset != "reference") { a.push_back("--preset"); a.push_back(r.preset); }
+  if (r.curve_seconds > 0) { a.push_back("--eval-every-seconds"); a.push_back(detail::format_number(r.curve_seconds, "%.17g")); }
   a.insert(a.end(), data_args.begin(), data_args.end());
   a.push_back("--quiet");
   return a;
@@ -788,6 +822,8 @@ inline ParsedJob parse_job_line(std::string_view line) {
       else if (k == "--scale") j.run.scale = std::stod(v);
       else if (k == "--sh-degree") j.run.sh_degree = std::stoi(v);
       else if (k == "--seed") j.run.seed = std::stoull(v);
+      else if (k == "--preset") { (void)parse_preset(v); j.run.preset = v; }
+      else if (k == "--eval-every-seconds") j.run.curve_seconds = std::stod(v);
       else if (k == "--images" || k == "--eval-every" || k == "--geometry-band") { j.data_args.push_back(k); j.data_args.push_back(v); }
       else if (k == "--bands") {
         j.run.bands.clear();
@@ -815,7 +851,8 @@ inline nlohmann::json manifest_json(StudyKind kind, const StudyOptions& o, const
     nlohmann::json labels = nlohmann::json::array();
     for (const auto& l : r.labels) labels.push_back({{"knob", l.knob}, {"value", l.value}});
     rj.push_back({{"id", r.id}, {"strategy", r.strategy}, {"scale", r.scale}, {"sh_degree", r.sh_degree},
-                  {"bands", r.bands}, {"seed", r.seed}, {"labels", labels}});
+                  {"bands", r.bands}, {"seed", r.seed}, {"labels", labels}, {"preset", r.preset},
+                  {"curve_seconds", r.curve_seconds}});
   }
   return {{"study", to_string(kind)}, {"scale", o.scale}, {"sh_degree", o.sh_degree}, {"seed", o.seed},
           {"data", data.string()}, {"runs", rj}};
@@ -856,6 +893,8 @@ inline Manifest read_manifest(const std::filesystem::path& file) {
       r.sh_degree = e.value("sh_degree", 3);
       r.seed = e.value("seed", std::uint64_t(0));
       r.bands = e.value("bands", std::vector<std::string>{});
+      r.preset = e.value("preset", std::string("reference"));
+      r.curve_seconds = e.value("curve_seconds", 0.0);
       if (e.contains("labels"))
         for (const auto& l : e["labels"]) r.labels.push_back({l.value("knob", ""), l.value("value", "")});
       m.runs.push_back(std::move(r));
