@@ -231,11 +231,18 @@ inline std::string bands_present(const ModelSet& models) {
   return s.empty() ? "none" : s;
 }
 
+/// The model file, or the folder of the per-band files, for messages.
+inline std::string where(const ModelSet& models) {
+  const auto& ms = models.models();
+  if (ms.size() == 1) return ms.front()->path.string();
+  return ms.front()->path.parent_path().string() + " (" + std::to_string(ms.size()) + " model_*.ply files)";
+}
+
 /// The source of `band` for a composite: a model that names it, or an ExportError saying why not.
 inline const BandSource& composite_source(const ModelSet& models, const std::string& band, const std::string& what) {
   const BandSource* s = models.named_source(band);
   if (!s)
-    throw ExportError(what + " needs band " + band + ", which the model does not name (bands present: " +
+    throw ExportError(where(models) + ": " + what + " needs band " + band + ", which the model does not name (bands present: " +
                       bands_present(models) + "); export a band it has with --band");
   return *s;
 }
@@ -286,7 +293,8 @@ inline ExportedModel select_export(const ModelSet& models, const ExportSelection
     }
     const BandSource* s = models.source(sel.band_id);
     if (!s)
-      throw ExportError("the model has no band " + sel.band_id + " (bands present: " + detail::bands_present(models) +
+      throw ExportError(detail::where(models) + ": the model has no band " + sel.band_id +
+                        " (bands present: " + detail::bands_present(models) +
                         "); export one of those with --band");
     const LoadedModel& m = *models.models()[s->model];
     const int f = s->first_channel;
