@@ -84,6 +84,17 @@ int run_export(const std::vector<std::string>& argv) {
   } catch (const msgs::ExportError& e) {
     throw UsageError(std::string("--out/--format: ") + e.what());
   }
+  if (args.has("format")) {
+    // A known extension that names another format would make viewers pick the wrong reader.
+    try {
+      const msgs::ExportFormat by_name = msgs::export_format_from_path(out);
+      if (by_name != fmt)
+        throw UsageError("--format " + format_name(fmt) + " but --out " + out.string() + " names " + format_name(by_name) +
+                         " (viewers choose the reader by extension): end --out in ." + format_name(fmt));
+    } catch (const msgs::ExportError&) {
+      // Any other extension: the explicit format decides.
+    }
+  }
   msgs::io::SpzOptions spz;
   spz.version = int(args.integer("spz-version", 3));
   if (spz.version != 2 && spz.version != 3) throw UsageError("--spz-version must be 2 or 3");
