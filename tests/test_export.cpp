@@ -674,10 +674,10 @@ TEST_CASE("msgs export: files from a run directory, and non-zero exits that say 
   CHECK(run_msgs("export --model " + run.string() + " --out " + (dir / "x.obj").string() + " --band D", dir, err) == 2);
   CHECK(run_msgs("export --model " + run.string() + " --out " + (dir / "x.ply").string() + " --band D --index ndvi", dir, err) == 2);
   CHECK(run_msgs("export --model " + run.string() + " --out " + (dir / "x.ply").string() + " --index evi", dir, err) == 2);
+  CHECK(err.find("ndvi") != std::string::npos);
   CHECK(run_msgs("export --model " + run.string() + " --out " + (dir / "x.ply").string() + " --band D --format splat", dir, err) == 2);
   CHECK(err.find("extension") != std::string::npos);
   CHECK(run_msgs("export --model " + run.string() + " --out " + (dir / "x.bin").string() + " --band D --format splat", dir, err) == 0);
   CHECK(fs::file_size(dir / "x.bin") == 30 * io::splat_record_bytes);
-  CHECK(err.find("ndvi") != std::string::npos);
 }
 #endif
