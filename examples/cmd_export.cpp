@@ -110,6 +110,17 @@ int run_export(const std::vector<std::string>& argv) {
   }
 
   const msgs::ModelSet models = msgs::load_models_for_export(model);
+  // Never replace a source model, nor add a model_*.ply that msgs would read as part of the run.
+  auto folder = [](const std::filesystem::path& p) { return p.parent_path().empty() ? std::filesystem::path(".") : p.parent_path(); };
+  const bool run_model_name = out.filename().string().rfind("model_", 0) == 0 && msgs::io::detail::lower_extension(out) == ".ply";
+  for (const auto& m : models.models()) {
+    std::error_code ec;
+    if (std::filesystem::exists(out, ec) && std::filesystem::equivalent(out, m->path, ec))
+      msgs::io::fail(out, "--out", "is the model being exported; choose another file name");
+    if (run_model_name && std::filesystem::is_directory(model, ec) && std::filesystem::equivalent(folder(out), folder(m->path), ec))
+      msgs::io::fail(out, "--out", "a model_*.ply in the run folder would be read as one more model of the run; "
+                                   "choose another name or folder");
+  }
   const msgs::ExportedModel e = msgs::select_export(models, sel);
   if (e.size() == 0)
     msgs::io::fail(e.source, "vertex",

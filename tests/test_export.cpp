@@ -679,5 +679,12 @@ TEST_CASE("msgs export: files from a run directory, and non-zero exits that say 
   CHECK(err.find("extension") != std::string::npos);
   CHECK(run_msgs("export --model " + run.string() + " --out " + (dir / "x.bin").string() + " --band D --format splat", dir, err) == 0);
   CHECK(fs::file_size(dir / "x.bin") == 30 * io::splat_record_bytes);
+  // The source model is never overwritten, and no model_*.ply is added to the run folder.
+  const auto before = fs::file_size(run / "model_joint.ply");
+  CHECK(run_msgs("export --model " + (run / "model_joint.ply").string() + " --out " + (run / "model_joint.ply").string() + " --band D", dir, err) == 1);
+  CHECK(err.find("is the model being exported") != std::string::npos);
+  CHECK(run_msgs("export --model " + run.string() + " --out " + (run / "model_nir.ply").string() + " --band MS_NIR", dir, err) == 1);
+  CHECK_FALSE(fs::exists(run / "model_nir.ply"));
+  CHECK(fs::file_size(run / "model_joint.ply") == before);
 }
 #endif
