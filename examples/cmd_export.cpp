@@ -68,7 +68,8 @@ int run_export(const std::vector<std::string>& argv) {
       sel.band_id = args.get("band");
     } else if (args.has("composite")) {
       if (args.get("composite") != "cir")
-        throw UsageError("--composite expects cir (NIR, R, G as red, green, blue), got '" + args.get("composite") + "'");
+        throw UsageError("--composite expects cir (NIR, R, G as red, green, blue), got '" + args.get("composite") +
+                         "'");
       sel.kind = msgs::ExportSelection::cir;
     } else {
       sel.kind = msgs::ExportSelection::index;
@@ -89,8 +90,9 @@ int run_export(const std::vector<std::string>& argv) {
     try {
       const msgs::ExportFormat by_name = msgs::export_format_from_path(out);
       if (by_name != fmt)
-        throw UsageError("--format " + format_name(fmt) + " but --out " + out.string() + " names " + format_name(by_name) +
-                         " (viewers choose the reader by extension): end --out in ." + format_name(fmt));
+        throw UsageError("--format " + format_name(fmt) + " but --out " + out.string() + " names " +
+                         format_name(by_name) + " (viewers choose the reader by extension): end --out in ." +
+                         format_name(fmt));
     } catch (const msgs::ExportError&) {
       // Any other extension: the explicit format decides.
     }
@@ -104,20 +106,25 @@ int run_export(const std::vector<std::string>& argv) {
     std::error_code ec;
     const std::filesystem::path parent = out.parent_path().empty() ? std::filesystem::path(".") : out.parent_path();
     if (!std::filesystem::is_directory(parent, ec))
-      msgs::io::fail(out, "--out", "the folder " + parent.string() + " does not exist; create it or choose another path");
+      msgs::io::fail(out, "--out",
+                     "the folder " + parent.string() + " does not exist; create it or choose another path");
     if (std::filesystem::is_directory(out, ec))
       msgs::io::fail(out, "--out", "is a folder; give a file name such as " + (out / "model.splat").string());
   }
 
   const msgs::ModelSet models = msgs::load_models_for_export(model);
   // Never replace a source model, nor add a model_*.ply that msgs would read as part of the run.
-  auto folder = [](const std::filesystem::path& p) { return p.parent_path().empty() ? std::filesystem::path(".") : p.parent_path(); };
-  const bool run_model_name = out.filename().string().rfind("model_", 0) == 0 && msgs::io::detail::lower_extension(out) == ".ply";
+  auto folder = [](const std::filesystem::path& p) {
+    return p.parent_path().empty() ? std::filesystem::path(".") : p.parent_path();
+  };
+  const bool run_model_name =
+      out.filename().string().rfind("model_", 0) == 0 && msgs::io::detail::lower_extension(out) == ".ply";
   for (const auto& m : models.models()) {
     std::error_code ec;
     if (std::filesystem::exists(out, ec) && std::filesystem::equivalent(out, m->path, ec))
       msgs::io::fail(out, "--out", "is the model being exported; choose another file name");
-    if (run_model_name && std::filesystem::is_directory(model, ec) && std::filesystem::equivalent(folder(out), folder(m->path), ec))
+    if (run_model_name && std::filesystem::is_directory(model, ec) &&
+        std::filesystem::equivalent(folder(out), folder(m->path), ec))
       msgs::io::fail(out, "--out", "a model_*.ply in the run folder would be read as one more model of the run; "
                                    "choose another name or folder");
   }

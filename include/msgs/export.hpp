@@ -155,7 +155,10 @@ ModelOf<3, 0> index_colours(const GaussianModel<G, float>& m, int a, int b, cons
       const float v = spec.value(dc_colour(m, i, a), dc_colour(m, i, b));
       rgb = colour_at(Colormap::diverging, (v - spec.lo) / span);
     }
-    for (int c = 0; c < 3; ++c) o.sh_at(i, 0, c) = std::isfinite(rgb[std::size_t(c)]) ? dc_for_colour(rgb[std::size_t(c)]) : rgb[std::size_t(c)];
+    for (int c = 0; c < 3; ++c) {
+      const float v = rgb[std::size_t(c)];
+      o.sh_at(i, 0, c) = std::isfinite(v) ? dc_for_colour(v) : v;
+    }
   }
   return o;
 }
@@ -242,14 +245,16 @@ inline std::string where(const ModelSet& models) {
 inline const BandSource& composite_source(const ModelSet& models, const std::string& band, const std::string& what) {
   const BandSource* s = models.named_source(band);
   if (!s)
-    throw ExportError(where(models) + ": " + what + " needs band " + band + ", which the model does not name (bands present: " +
+    throw ExportError(where(models) + ": " + what + " needs band " + band +
+                      ", which the model does not name (bands present: " +
                       bands_present(models) + "); export a band it has with --band");
   return *s;
 }
 
 /// One model holds every band of a composite, or an ExportError explaining why it must.
-inline void require_one_model(const ModelSet& models, const std::vector<std::pair<std::string, const BandSource*>>& srcs,
-                              const std::string& what) {
+using NamedSources = std::vector<std::pair<std::string, const BandSource*>>;
+
+inline void require_one_model(const ModelSet& models, const NamedSources& srcs, const std::string& what) {
   for (const auto& [band, s] : srcs) {
     if (s->model == srcs.front().second->model) continue;
     throw ExportError(what + " combines colours per Gaussian, so its bands must live on the same Gaussians (one Joint "
@@ -298,7 +303,8 @@ inline ExportedModel select_export(const ModelSet& models, const ExportSelection
                         "); export one of those with --band");
     const LoadedModel& m = *models.models()[s->model];
     const int f = s->first_channel;
-    const std::array<int, 3> pick = s->channels == 3 ? std::array<int, 3>{f, f + 1, f + 2} : std::array<int, 3>{f, f, f};
+    const std::array<int, 3> pick =
+        s->channels == 3 ? std::array<int, 3>{f, f + 1, f + 2} : std::array<int, 3>{f, f, f};
     out.model = detail::visit_loaded(m, [&](const auto& g) -> RgbModel { return detail::pick_channels(g, pick); });
     out.source = m.path;
     out.what = "band " + sel.band_id;
@@ -312,7 +318,7 @@ inline ExportedModel select_export(const ModelSet& models, const ExportSelection
   } else if (sel.kind == ExportSelection::cir) {
     const std::string what = "colour infrared (NIR, R, G as red, green, blue)";
     const std::vector<std::string> bands = {"MS_NIR", "MS_R", "MS_G"};
-    std::vector<std::pair<std::string, const BandSource*>> srcs;
+    detail::NamedSources srcs;
     for (const auto& b : bands) srcs.emplace_back(b, &detail::composite_source(models, b, what));
     detail::require_one_model(models, srcs, what);
     const LoadedModel& m = *models.models()[srcs[0].second->model];
@@ -327,12 +333,13 @@ inline ExportedModel select_export(const ModelSet& models, const ExportSelection
     if (!spec.value || !(std::isfinite(spec.lo) && std::isfinite(spec.hi) && spec.hi > spec.lo))
       throw ExportError("index " + spec.name + ": needs a value function and a finite range lo < hi");
     const std::string what = spec.name + " (per Gaussian)";
-    std::vector<std::pair<std::string, const BandSource*>> srcs;
+    detail::NamedSources srcs;
     for (const auto& b : {spec.band_a, spec.band_b}) srcs.emplace_back(b, &detail::composite_source(models, b, what));
     detail::require_one_model(models, srcs, what);
     const LoadedModel& m = *models.models()[srcs[0].second->model];
     const int a = srcs[0].second->first_channel, b = srcs[1].second->first_channel;
-    out.model = detail::visit_loaded(m, [&](const auto& g) -> RgbModel { return detail::index_colours(g, a, b, spec); });
+    out.model =
+        detail::visit_loaded(m, [&](const auto& g) -> RgbModel { return detail::index_colours(g, a, b, spec); });
     out.source = m.path;
     out.what = what;
   }

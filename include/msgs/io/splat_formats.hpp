@@ -226,8 +226,10 @@ std::vector<unsigned char> encode_splat(const GaussianModel<G, float>& m, const 
   out.reserve(m.size() * splat_record_bytes);
   for (std::size_t i : splat_order(m)) {
     for (int d = 0; d < 3; ++d) detail::put_f32_le(out, m.means[3 * i + std::size_t(d)]);
-    for (int d = 0; d < 3; ++d)
-      detail::put_f32_le(out, static_cast<float>(std::exp(detail::clamped_log_scale(m.log_scales[3 * i + std::size_t(d)]))));
+    for (int d = 0; d < 3; ++d) {
+      const double log_scale = detail::clamped_log_scale(m.log_scales[3 * i + std::size_t(d)]);
+      detail::put_f32_le(out, static_cast<float>(std::exp(log_scale)));
+    }
     for (int c = 0; c < 3; ++c) detail::put_u8(out, detail::to_u8(255.0 * (0.5 + sh::C0 * m.sh_at(i, 0, c))));
     detail::put_u8(out, detail::to_u8(255.0 * detail::sigmoid(m.opacity_logits[i])));
     for (double q : detail::unit_quat(m, i)) detail::put_u8(out, detail::to_u8(128.0 * q + 128.0));
@@ -301,7 +303,8 @@ std::vector<unsigned char> encode_spz_payload(const GaussianModel<G, float>& m, 
   const int bucket1 = 1 << (8 - opt.sh1_bits), bucket_rest = 1 << (8 - opt.sh_rest_bits);
   for (std::size_t i = 0; i < n; ++i)
     for (int k = 1; k < K; ++k)
-      for (int c = 0; c < 3; ++c) detail::put_u8(out, detail::spz_sh_byte(m.sh_at(i, k, c), k < 4 ? bucket1 : bucket_rest));
+      for (int c = 0; c < 3; ++c)
+        detail::put_u8(out, detail::spz_sh_byte(m.sh_at(i, k, c), k < 4 ? bucket1 : bucket_rest));
   return out;
 }
 
