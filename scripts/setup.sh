@@ -2,7 +2,7 @@
 # scripts/setup.sh: install the Debian packages msgs needs (idempotent; skips apt when all are present).
 set -euo pipefail
 pkgs=(build-essential cmake pkg-config libeigen3-dev libglm-dev libomp-dev doctest-dev libbenchmark-dev
-      libstb-dev nlohmann-json3-dev libtiff-dev libpng-dev libnanoflann-dev gnuplot-nox
+      libstb-dev nlohmann-json3-dev libtiff-dev libpng-dev zlib1g-dev libnanoflann-dev gnuplot-nox
       clang-14 libclang-rt-14-dev  # clang + its libFuzzer/ASan runtimes for fuzz/run.sh
       colmap exiv2  # `msgs import`: poses (CPU COLMAP, run headless) and camera metadata
       libcpp-httplib-dev)  # `msgs view`: the HTTP server of the browser viewer (links the tool only)
