@@ -26,6 +26,7 @@
 #include "image.hpp"
 #include "io/bands.hpp"
 #include "io/error.hpp"
+#include "io/image_io.hpp"  // io::detail::lower_extension
 #include "io/ply.hpp"
 #include "rasterize.hpp"
 
