@@ -1,13 +1,12 @@
 // include/msgs/colormap.hpp
 // Colour scales for single-channel data (diverging RdYlGn for indices, sequential "hot" for
-// errors), colour bars, and legends with their values under a picture.
+// errors), colour bars, and legends with their values (drawn with text.hpp) under a picture.
 #pragma once
 
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstddef>
-#include <cstdint>
 #include <cstdio>
 #include <stdexcept>
 #include <string>
@@ -15,6 +14,7 @@
 
 #include "detail/image_checks.hpp"
 #include "image.hpp"
+#include "text.hpp"
 
 namespace msgs {
 
@@ -84,41 +84,6 @@ inline Image<float> legend_bar(int width, int height, Colormap cm) {
 }
 
 namespace detail {
-/// 3x5 pixel glyphs, one row per 3-bit number (bit 2 = left column), for legend labels.
-inline const std::uint8_t* glyph(char ch) {
-  static constexpr std::uint8_t digits[10][5] = {{7, 5, 5, 5, 7}, {2, 6, 2, 2, 7}, {7, 1, 7, 4, 7}, {7, 1, 7, 1, 7},
-                                                 {5, 5, 7, 1, 1}, {7, 4, 7, 1, 7}, {7, 4, 7, 5, 7}, {7, 1, 1, 1, 1},
-                                                 {7, 5, 7, 5, 7}, {7, 5, 7, 1, 7}};
-  static constexpr std::uint8_t minus[5] = {0, 0, 7, 0, 0}, plus[5] = {0, 2, 7, 2, 0}, dot[5] = {0, 0, 0, 0, 2};
-  if (ch >= '0' && ch <= '9') return digits[ch - '0'];
-  if (ch == '-') return minus;
-  if (ch == '+') return plus;
-  if (ch == '.') return dot;
-  return nullptr;
-}
-inline constexpr int glyph_w = 3, glyph_h = 5;
-
-inline int text_width(std::string_view s, int scale) { return s.empty() ? 0 : int(s.size()) * (glyph_w + 1) * scale - scale; }
-
-/// Draw `s` (digits, sign, point) with its top-left corner at (x0, y0), clipped to the image.
-inline void draw_text(Image<float>& img, int x0, int y0, std::string_view s, int scale, float value) {
-  for (std::size_t i = 0; i < s.size(); ++i) {
-    const std::uint8_t* g = glyph(s[i]);
-    if (!g) continue;
-    const int gx = x0 + int(i) * (glyph_w + 1) * scale;
-    for (int r = 0; r < glyph_h; ++r)
-      for (int c = 0; c < glyph_w; ++c) {
-        if (!((g[r] >> (glyph_w - 1 - c)) & 1)) continue;
-        for (int dy = 0; dy < scale; ++dy)
-          for (int dx = 0; dx < scale; ++dx) {
-            const int x = gx + c * scale + dx, y = y0 + r * scale + dy;
-            if (x < 0 || y < 0 || x >= img.width || y >= img.height) continue;
-            for (int k = 0; k < img.channels; ++k) img.at(x, y, k) = value;
-          }
-      }
-  }
-}
-
 inline std::string format_label(float v) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%g", double(v));
@@ -137,36 +102,74 @@ inline Image<float> to_rgb(const Image<float>& img) {
   return out;
 }
 
-/// `rgb` [H, W, 3] with a white strip below it holding a colour bar of `cm` from `lo` (left) to
-/// `hi` (right), tick marks at both ends and the middle, and their values as pixel-font labels
-/// (left out when the image is too narrow for them). The result keeps the width.
-inline Image<float> with_legend(const Image<float>& rgb, Colormap cm, float lo, float hi) {
-  if (rgb.channels != 3) throw std::invalid_argument("with_legend: need an RGB image");
-  const int W = rgb.width, H = rgb.height;
-  const int pad = std::max(2, H / 50), bar_h = std::max(4, H / 16), scale = std::max(1, H / 160);
-  const int text_h = detail::glyph_h * scale;
-  const int strip = pad + bar_h + pad + text_h + pad;
-  Image<float> out(W, H + strip, 3, 1.0f);
-  std::copy(rgb.data.begin(), rgb.data.end(), out.data.begin());
-  const int x0 = W > 2 * pad + 2 ? pad : 0, x1 = W > 2 * pad + 2 ? W - pad - 1 : W - 1;  // bar columns [x0, x1]
-  const Image<float> bar = legend_bar(x1 - x0 + 1, bar_h, cm);
-  const int bar_y = H + pad;
-  for (int y = 0; y < bar_h; ++y)
+/// Smallest size of the words in pictures (legend values, sheet labels), pixels per em: DejaVu
+/// Sans stays legible down to about 12 px.
+inline constexpr int min_label_px = 12;
+
+/// Size of the words in a picture whose cells are `width` pixels wide: 1/40 of it (a 1800-pixel
+/// image gets 45 px), at least min_label_px, at most 200.
+inline int label_px(int width) { return std::clamp(int(std::lround(double(width) / 40.0)), min_label_px, 200); }
+
+/// Sizes inside a legend strip for text at `px` (see legend_strip).
+struct LegendMetrics {
+  int pad = 0;    ///< margin above the bar, tick length, margin below the values
+  int bar_h = 0;  ///< height of the colour bar
+  int text_h = 0; ///< height of the value line (0 without text)
+  int height() const { return pad + bar_h + pad + text_h + (text_h > 0 ? pad : 0); }
+};
+
+/// The sizes legend_strip uses for text at `px`, with or without text.
+inline LegendMetrics legend_metrics(int px, const TextRenderer* text) {
+  LegendMetrics m;
+  m.pad = std::max(2, px / 5);
+  m.bar_h = std::max(4, (px * 2) / 3);
+  m.text_h = text ? text->line_height(px) : 0;
+  return m;
+}
+
+/// A legend [legend_metrics(px, text).height(), width, 3] on `background`: a colour bar of `cm`
+/// from `lo` (left) to `hi` (right) with `pad` pixels left and right (none when too narrow),
+/// tick marks of `ink` at both ends and the middle, and below them their values at `px` (%g),
+/// left-aligned, centred and right-aligned to the ticks. The values are left out when `text` is
+/// nullptr or they do not fit side by side.
+inline Image<float> legend_strip(int width, Colormap cm, float lo, float hi, const TextRenderer* text, int px,
+                                 float background = 1.0f, float ink = 0.0f) {
+  if (width < 1) throw std::invalid_argument("legend_strip: width must be >= 1");
+  const LegendMetrics m = legend_metrics(px, text);
+  Image<float> out(width, m.height(), 3, background);
+  const int pad = m.pad;
+  const int x0 = width > 2 * pad + 2 ? pad : 0, x1 = width > 2 * pad + 2 ? width - pad - 1 : width - 1;  // bar [x0, x1]
+  const Image<float> bar = legend_bar(x1 - x0 + 1, m.bar_h, cm);
+  for (int y = 0; y < m.bar_h; ++y)
     for (int x = 0; x < bar.width; ++x)
-      for (int k = 0; k < 3; ++k) out.at(x0 + x, bar_y + y, k) = bar.at(x, y, k);
-  const int xm = (x0 + x1) / 2, tick_y = bar_y + bar_h;
+      for (int k = 0; k < 3; ++k) out.at(x0 + x, pad + y, k) = bar.at(x, y, k);
+  const int xm = (x0 + x1) / 2, tick_y = pad + m.bar_h;
   for (int x : {x0, xm, x1})
     for (int y = tick_y; y < tick_y + pad; ++y)
-      for (int k = 0; k < 3; ++k) out.at(x, y, k) = 0.0f;
+      for (int k = 0; k < 3; ++k) out.at(x, y, k) = ink;
+  if (!text) return out;
   const std::string l0 = detail::format_label(lo), lm = detail::format_label(0.5f * (lo + hi)),
                     l1 = detail::format_label(hi);
-  const int w0 = detail::text_width(l0, scale), wm = detail::text_width(lm, scale), w1 = detail::text_width(l1, scale);
-  if (w0 + wm + w1 + 4 * scale <= x1 - x0 + 1) {
-    const int ty = tick_y + pad;
-    detail::draw_text(out, x0, ty, l0, scale, 0.0f);
-    detail::draw_text(out, xm - wm / 2, ty, lm, scale, 0.0f);
-    detail::draw_text(out, x1 + 1 - w1, ty, l1, scale, 0.0f);
-  }
+  const int w0 = text_width(*text, l0, px), wm = text_width(*text, lm, px), w1 = text_width(*text, l1, px);
+  if (w0 + wm + w1 + px > x1 - x0 + 1) return out;  // no room for three values and two spaces
+  const int ty = tick_y + pad;
+  const std::array<float, 3> c{ink, ink, ink};
+  (void)draw_text(out, *text, l0, px, x0, ty, c);
+  (void)draw_text(out, *text, lm, px, xm - wm / 2, ty, c);
+  (void)draw_text(out, *text, l1, px, x1 + 1 - w1, ty, c);
+  return out;
+}
+
+/// `rgb` [H, W, 3] with a white strip below it: legend_strip of `cm` from `lo` to `hi` with its
+/// values in black at label_px(W). The result keeps the width. `text`: how the values are
+/// drawn; nullptr leaves them out (the bar and ticks stay).
+inline Image<float> with_legend(const Image<float>& rgb, Colormap cm, float lo, float hi,
+                                const TextRenderer* text = default_text()) {
+  if (rgb.channels != 3) throw std::invalid_argument("with_legend: need an RGB image");
+  const Image<float> strip = legend_strip(rgb.width, cm, lo, hi, text, label_px(rgb.width));
+  Image<float> out(rgb.width, rgb.height + strip.height, 3, 1.0f);
+  std::copy(rgb.data.begin(), rgb.data.end(), out.data.begin());
+  std::copy(strip.data.begin(), strip.data.end(), out.data.begin() + std::ptrdiff_t(rgb.data.size()));
   return out;
 }
 

@@ -3,6 +3,7 @@
 // and contact sheets per eval capture (bands, CIR, NDVI, NDRE).
 #pragma once
 
+#include <algorithm>
 #include <cstddef>
 #include <deque>
 #include <filesystem>
@@ -11,6 +12,7 @@
 #include <set>
 #include <stdexcept>
 #include <string>
+#include <tuple>
 #include <utility>
 #include <vector>
 
@@ -26,6 +28,7 @@
 #include "render_dataset.hpp"
 #include "schedule.hpp"
 #include "spectral_index.hpp"
+#include "text.hpp"
 #include "train.hpp"
 
 namespace msgs {
@@ -41,6 +44,9 @@ struct EvalOptions {
   float index_error_scale = 0.5f;         ///< NDVI / NDRE difference shown as white
   int gap = 4;                            ///< pixels between contact-sheet cells
   float fill = 0.35f;                     ///< grey between cells: error maps run from black to white
+  /// Words on the sheets (row labels, column titles, legends with values), drawn with
+  /// default_text(); without a text renderer the sheets have none.
+  bool labels = true;
   /// Called after each eval capture with (captures done, eval captures); may be empty.
   std::function<void(std::size_t, std::size_t)> on_progress;
 };
@@ -53,12 +59,26 @@ struct EvalResult {
   std::vector<std::string> files;                ///< sheets written, relative to the sheet directory
 };
 
+/// A band's row label on contact sheets: its colour and id, "green (MS_G)"; other ids as they are.
+inline std::string band_label(const std::string& id) {
+  static const std::pair<const char*, const char*> names[] = {
+      {"D", "RGB"}, {"MS_G", "green"}, {"MS_R", "red"}, {"MS_RE", "red edge"}, {"MS_NIR", "NIR"}};
+  for (const auto& [band, name] : names)
+    if (id == band) return std::string(name) + " (" + id + ")";
+  return id;
+}
+
 /// PSNR and SSIM of every eval frame whose band a model renders, at full resolution with the
 /// reference evaluation background (eval_background) and renders clamped to [0, 1], exactly as
 /// Trainer::evaluate. With `sheet_dir` non-empty and opt.sheets, one `sheet_<capture>.png` per
 /// eval capture (the first opt.max_sheets captures when that is >= 0): a row per band of ground
 /// truth | render | error map, then rows for CIR, NDVI and NDRE of ground truth | render (all from
-/// the NIR camera) | difference, where the bands exist. Sheets are written straight into
+/// the NIR camera) | difference, where the bands exist. With opt.labels and a text renderer,
+/// each row is labelled (band_label, "CIR", "NDVI", "NDRE"), the columns are titled "ground truth
+/// | render | error" above the first row and "GT | render | difference" above the first index
+/// row, and legends give the scales: the error scale [0, error_scale] below the last error row
+/// (bands and CIR), and below the index rows [-1, 1] under GT and render and
+/// [0, index_error_scale] under the difference. Sheets are written straight into
 /// `sheet_dir`, each file atomically (stage the directory with OutputStage for all-or-nothing).
 /// Ground-truth composites combine the bands' own images (one size required; they come from
 /// slightly different viewpoints, as the cameras do).
@@ -123,7 +143,11 @@ inline EvalResult evaluate_models(const io::Dataset& ds, const ModelSet& models,
     if (!sheet) continue;
 
     SheetCells rows;
-    for (const View& v : views) rows.push_back({&v.gt, &v.render, &v.error});
+    SheetLabels labels;
+    for (const View& v : views) {
+      rows.push_back({&v.gt, &v.render, &v.error});
+      labels.rows.push_back(band_label(v.band));
+    }
     // Composites: ground truth from each band's own image, renders from the NIR camera.
     std::deque<Image<float>> extra;  // keeps the composite images alive for `rows` (stable addresses)
     auto find_view = [&](const char* b) -> const View* {
@@ -162,17 +186,32 @@ inline EvalResult evaluate_models(const io::Dataset& ds, const ModelSet& models,
         Image<float> cg = cir_composite(*gn, *gr, *gg), cr = cir_composite(*rn, *rr, *rg);
         Image<float> ce = error_map(cr, cg, opt.error_scale);
         add_row(std::move(cg), std::move(cr), std::move(ce));
+        labels.rows.push_back("CIR");
       }
-      for (auto [gb, rb] : {std::pair{gr, rr}, std::pair{ge, re}}) {
+      const std::size_t first_index_row = rows.size();
+      for (auto [gb, rb, name] : {std::tuple{gr, rr, "NDVI"}, std::tuple{ge, re, "NDRE"}}) {
         if (!gb) continue;
+        labels.rows.push_back(name);
         const Image<float> ig = normalized_difference(*gn, *gb), ir = normalized_difference(*rn, *rb);
         add_row(colourize(ig, Colormap::diverging, index_scale_lo, index_scale_hi),
                 colourize(ir, Colormap::diverging, index_scale_lo, index_scale_hi),
                 error_map(ir, ig, opt.index_error_scale));
       }
+      if (rows.size() > first_index_row) {
+        labels.headings.push_back({first_index_row, {"GT", "render", "difference"}});
+        for (std::size_t c : {0, 1})
+          labels.legends.push_back({rows.size() - 1, c, Colormap::diverging, index_scale_lo, index_scale_hi});
+        labels.legends.push_back({rows.size() - 1, 2, Colormap::sequential, 0.0f, opt.index_error_scale});
+      }
     }
+    // The bands' rows and CIR end where the index rows begin (or the sheet ends).
+    std::size_t last_error_row = rows.size() - 1;
+    for (const auto& h : labels.headings) last_error_row = std::min(last_error_row, h.row - 1);
+    labels.headings.insert(labels.headings.begin(), {0, {"ground truth", "render", "error"}});
+    labels.legends.push_back({last_error_row, 2, Colormap::sequential, 0.0f, opt.error_scale});
     const std::string name = "sheet_" + cap.key + ".png";
-    io::write_png8(sheet_dir / name, contact_sheet(rows, opt.gap, opt.fill));
+    io::write_png8(sheet_dir / name, opt.labels ? contact_sheet(rows, labels, opt.gap, opt.fill, default_text())
+                                                : contact_sheet(rows, opt.gap, opt.fill));
     res.files.push_back(name);
   }
   if (opt.on_progress) opt.on_progress(captures.size(), captures.size());
