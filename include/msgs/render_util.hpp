@@ -5,8 +5,10 @@
 //
 // Layers, bottom up:
 //   pictures    spectral_index.hpp  normalized_difference / ndvi / ndre, cir_composite
-//               colormap.hpp        Colormap, colour_at, colourize, legend_bar, with_legend, to_rgb
-//               contact_sheet.hpp   error_map, contact_sheet_layout, contact_sheet
+//               colormap.hpp        Colormap, colour_at, colourize, legend_bar, legend_strip,
+//                                   with_legend, to_rgb
+//               text.hpp            TextRenderer, draw_text, default_text (FreeType where built with it)
+//               contact_sheet.hpp   error_map, contact_sheet_layout, contact_sheet (optionally labelled)
 //   models      model_set.hpp       load_model (inspect_ply -> Gaussian<C, D>), LoadedModel,
 //                                   make_typed_renderer / make_channel_renderer, ModelSet
 //   datasets    render_dataset.hpp  capture_key / group_captures, band_background, OutputStage,
@@ -31,4 +33,5 @@
 #include "render_dataset.hpp"
 #include "schedule.hpp"
 #include "spectral_index.hpp"
+#include "text.hpp"
 #include "train.hpp"
