@@ -1,7 +1,8 @@
 // tests/test_render_util.cpp
-// Tests of render_util.hpp: spectral indices, colour scales, CIR order, error maps, contact-sheet
-// layout, PLY model dispatch and band resolution, output staging, and the dataset render and
-// evaluation paths end to end on the synthetic tiny dataset.
+// Tests of what render_util.hpp includes: spectral indices, colour scales, CIR order, error maps,
+// contact-sheet layout (the labelled one: test_contact_sheet.cpp), PLY model dispatch and band
+// resolution, output staging, and the dataset render and evaluation paths end to end on the
+// synthetic tiny dataset.
 #include <doctest/doctest.h>
 
 #include <msgs/init.hpp>
@@ -591,14 +592,42 @@ TEST_CASE("evaluation: metrics as an independent render, contact sheet layout") 
       CHECK(std::isfinite(m.psnr[i]));
     }
   }
-  // One sheet per eval capture: five band rows, then CIR, NDVI, NDRE; three columns.
+  // One sheet per eval capture: five band rows, then CIR, NDVI, NDRE; three columns. With a text
+  // renderer: row labels in a column on the left, a line of column titles above the first row
+  // and above NDVI, legend strips below CIR and below NDRE.
   const std::size_t eval_captures = std::size_t(t.synth.eval_captures);
   REQUIRE(res.files.size() == eval_captures);
   const Image<float> sheet = io::read_image(sheets / res.files.front());
   const int gap = EvalOptions{}.gap;
   const int rgb_w = t.synth.width[0], rgb_h = t.synth.height[0], ms_h = t.synth.height[1];
-  CHECK(sheet.width == 4 * gap + 3 * rgb_w);
-  CHECK(sheet.height == 9 * gap + rgb_h + 7 * ms_h);
+  int label_w = 0, lines_h = 0;
+  if (const TextRenderer* text = default_text()) {
+    const int px = label_px(rgb_w);
+    for (const char* l : {"RGB (D)", "green (MS_G)", "red (MS_R)", "red edge (MS_RE)", "NIR (MS_NIR)", "CIR", "NDVI", "NDRE"})
+      label_w = std::max(label_w, text_width(*text, l, px));
+    label_w += gap;
+    lines_h = 2 * (text->line_height(px) + gap) + 2 * (legend_metrics(px, text).height() + gap);
+  }
+  CHECK(sheet.width == 4 * gap + 3 * rgb_w + label_w);
+  CHECK(sheet.height == 9 * gap + rgb_h + 7 * ms_h + lines_h);
+  // Without labels: the grid alone.
+  EvalOptions plain;
+  plain.labels = false;
+  plain.max_sheets = 1;
+  const fs::path plain_dir = t.root / "sheets_plain";
+  fs::create_directories(plain_dir);
+  const EvalResult pr = evaluate_models(ds, t.models, plain_dir, plain);
+  const Image<float> ps = io::read_image(plain_dir / pr.files.front());
+  CHECK(ps.width == 4 * gap + 3 * rgb_w);
+  CHECK(ps.height == 9 * gap + rgb_h + 7 * ms_h);
+}
+
+TEST_CASE("band_label: colour name and id") {
+  CHECK(msgs::band_label("D") == "RGB (D)");
+  CHECK(msgs::band_label("MS_G") == "green (MS_G)");
+  CHECK(msgs::band_label("MS_RE") == "red edge (MS_RE)");
+  CHECK(msgs::band_label("MS_NIR") == "NIR (MS_NIR)");
+  CHECK(msgs::band_label("X") == "X");
 }
 
 TEST_CASE("Separate models in a directory render the same images; composites where bands exist") {

@@ -1,4 +1,6 @@
-// tests/downstream/main.cpp: renders one Gaussian through the installed msgs package.
+// tests/downstream/main.cpp: renders one Gaussian through the installed msgs package, and puts a
+// legend (with its values where msgs::freetype is linked) under the picture.
+#include <msgs/colormap.hpp>
 #include <msgs/msgs.hpp>
 
 #include <cstdio>
@@ -18,5 +20,9 @@ int main() {
   const auto& img = raster.forward(model, cam);
   const float centre = img.at(16, 16, 0);
   std::printf("downstream: centre red = %.4f\n", centre);
+  const msgs::Image<float> pic = msgs::with_legend(img, msgs::Colormap::diverging, -1.0f, 1.0f);
+  std::printf("downstream: legend %s (%dx%d)\n", msgs::default_text() ? "with values" : "without values", pic.width,
+              pic.height);
+  if (pic.width != 32 || pic.height <= 32) return 1;
   return centre > 0.5f ? 0 : 1;
 }
