@@ -17,10 +17,10 @@ namespace {
 
 constexpr const char* kUsage =
     "usage: msgs eval --data DIR --model PLY|DIR [--out DIR] [--bands LIST] [--orient none|center] [--no-sheets]\n"
-    "                 [--images NAME] [--eval-every N]\n"
+    "                 [--images NAME] [--eval-every N] [--ssim valid|same]\n"
     "\n"
     "Evaluate a trained model on the dataset's eval split at full resolution, with the reference\n"
-    "evaluation background (grey 0.149, 0.165, 0.216; its luminance for single bands) and renders\n"
+    "evaluation background (grey 0.1490, 0.1647, 0.2157; its luminance for single bands) and renders\n"
     "clamped to [0, 1]. Writes to DIR (default: <model directory>/eval):\n"
     "  eval.json           per-band PSNR / SSIM (every image, mean, std), per-frame values\n"
     "  eval.md             the table in the paper's layout (All, RGB, G, R, RE, NIR)\n"
@@ -32,7 +32,9 @@ constexpr const char* kUsage =
     "  --model PLY|DIR     a model PLY or a directory of model_*.ply files (see `msgs render --help`)\n"
     "  --bands LIST        only these bands (comma separated ids)\n"
     "  --orient none       the model was trained with --orient none (or --no-orient)\n"
-    "  --no-sheets         metrics only\n";
+    "  --no-sheets         metrics only\n"
+    "  --ssim W            valid (default: SSIM over the 11x11 windows inside the image, pytorch-msssim,\n"
+    "                      as the reference implementation and `msgs train`) or same (3DGS: zero padding)\n";
 
 constexpr const char* kLpipsNote =
     "LPIPS is not computed: it needs pretrained network weights, which cannot be obtained offline.";
@@ -40,7 +42,7 @@ constexpr const char* kLpipsNote =
 using msgs::cli::split_list;
 
 int run_eval(const std::vector<std::string>& argv) {
-  const msgs::cli::Args args(argv, {"data", "images", "eval-every", "model", "out", "bands", "orient"}, {"help", "no-orient", "no-sheets"});
+  const msgs::cli::Args args(argv, {"data", "images", "eval-every", "model", "out", "bands", "orient", "ssim"}, {"help", "no-orient", "no-sheets"});
   if (args.flag("help")) { std::fputs(kUsage, stdout); return 0; }
   if (!args.positional().empty()) throw msgs::cli::UsageError("unexpected argument '" + args.positional()[0] + "'");
   namespace fs = std::filesystem;
@@ -59,6 +61,9 @@ int run_eval(const std::vector<std::string>& argv) {
   msgs::OutputStage stage(out);
   msgs::EvalOptions opt;
   opt.sheets = !args.flag("no-sheets");
+  const std::string ssim_mode = args.get("ssim", "valid");
+  if (ssim_mode != "valid" && ssim_mode != "same") throw msgs::cli::UsageError("--ssim must be valid or same, got '" + ssim_mode + "'");
+  opt.ssim_border = ssim_mode == "valid" ? msgs::SsimBorder::valid : msgs::SsimBorder::same;
   opt.on_progress = [](std::size_t done, std::size_t total) {
     std::fprintf(stderr, "\revaluating capture %zu/%zu ", done, total);
     if (done == total) std::fprintf(stderr, "\n");
@@ -90,8 +95,9 @@ int run_eval(const std::vector<std::string>& argv) {
 
   const std::string table = msgs::cli::metrics_markdown(res.metrics);
   std::string md = "# Evaluation\n\nData: `" + data.string() + "`, model: `" + model.string() +
-                   "`. Eval split at full resolution, evaluation background grey (0.149, 0.165, 0.216) "
-                   "and its luminance for single bands, renders clamped to [0, 1]; mean ± standard deviation "
+                   "`. Eval split at full resolution, evaluation background grey (0.1490, 0.1647, 0.2157) "
+                   "and its BT.601 luminance for single bands, renders clamped to [0, 1], SSIM over " + ssim_mode +
+                   " windows; mean ± standard deviation "
                    "over the eval images of each band; All is the mean of the band means.\n\n" +
                    table + "\n" + kLpipsNote + "\n";
   if (!res.skipped_bands.empty()) {

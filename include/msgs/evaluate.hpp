@@ -47,6 +47,9 @@ struct EvalOptions {
   /// Words on the sheets (row labels, column titles, legends with values), drawn with
   /// default_text(); without a text renderer the sheets have none.
   bool labels = true;
+  /// SSIM windows: valid (pytorch-msssim, the reference implementation's evaluation, and what
+  /// `msgs train` reports by default) or same (3DGS: zero-padded borders).
+  SsimBorder ssim_border = SsimBorder::valid;
   /// Called after each eval capture with (captures done, eval captures); may be empty.
   std::function<void(std::size_t, std::size_t)> on_progress;
 };
@@ -133,7 +136,7 @@ inline EvalResult evaluate_models(const io::Dataset& ds, const ModelSet& models,
       v.gt = io::load_frame_image(ds, f, 1);
       BandMetrics& m = res.metrics[slot.at(b.id)];
       m.psnr.push_back(psnr(v.render, v.gt));
-      m.ssim.push_back(ssim(v.render, v.gt));
+      m.ssim.push_back(ssim(v.render, v.gt, opt.ssim_border));
       res.frames[slot.at(b.id)].push_back(f.file_path);
       if (sheet) {
         v.error = error_map(v.render, v.gt, opt.error_scale);
