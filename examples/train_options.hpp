@@ -19,8 +19,8 @@ namespace msgs::cli {
     "  --preset P        reference (default: the multi-spectral reference implementation in every\n" \
     "                    detail: renders clamped to [0, 1] before the loss, SSIM over valid 11x11\n" \
     "                    windows, each band's images reshuffled on every pass) or fast (CPU budgets:\n" \
-    "                    the reference plus a colour learning rate that follows --scale, narrow\n" \
-    "                    bands started from the geometry band's colours, sparse Adam; see README)\n" \
+    "                    the reference plus a colour learning rate that follows --scale and narrow\n" \
+    "                    bands started from the geometry band's colours; see README)\n" \
     "  --ssim W          valid (reference, pytorch-msssim) or same (3DGS: zero-padded borders), in\n" \
     "                    the loss and the evaluation\n" \
     "  --no-clamp        the loss sees the raw render (3DGS) instead of the render clamped to [0, 1]\n" \
@@ -30,7 +30,7 @@ namespace msgs::cli {
     "  --adam MODE       dense (reference: every Gaussian each step, zero gradient where the view did\n" \
     "                    not see it, as torch's Adam) or sparse (gradients, Adam and the scale\n" \
     "                    regulariser only for the Gaussians the view saw: faster, a different\n" \
-    "                    optimisation; the fast preset's choice)\n" \
+    "                    optimisation, which trains worse at CPU schedules: see README)\n" \
     "  --eval-every-seconds T  anytime evaluation: every T seconds of training, PSNR / SSIM per band\n" \
     "                    on a fixed subset of the eval split (its time is kept off the training\n" \
     "                    clock); result.json gets the curve, and curve.csv is written\n" \

@@ -191,10 +191,10 @@ TEST_CASE("presets: reference is TrainOptions{}, fast names and applies its depa
 
   apply_preset(Preset::fast, t, 0.025);
   CHECK(t.adam.lr_sh_dc == doctest::Approx(0.01));
-  CHECK(t.sparse);
+  CHECK_FALSE(t.sparse);  // sparse Adam trains worse at CPU schedules (README): not a fast-preset choice
   CHECK(t.spectral_colour_init);
   CHECK(t.clamp_render);  // the parity switches stay the reference's
-  CHECK(preset_departures(Preset::fast, 0.025).size() == 3);
+  CHECK(preset_departures(Preset::fast, 0.025).size() == 2);
   CHECK(fast_lr_sh_dc(0.4) == doctest::Approx(0.0025));
   CHECK(fast_lr_sh_dc(1.0) == doctest::Approx(0.0025));
   CHECK(fast_lr_sh_dc(1e-4) == doctest::Approx(0.025));  // at most 10x

@@ -51,7 +51,6 @@ inline std::vector<PresetDeparture> preset_departures(Preset p, double scale) {
                         " (reference 0.0025): 0.0025 sqrt(0.4 / scale), between 1x and 10x"},
       {"spectral-init", "narrow bands start from the geometry band's luminance at their own brightness, "
                         "not from random colours (SpecDelay's Joint and Split's band models)"},
-      {"sparse-adam", "gradients, Adam and the scale regulariser only for the Gaussians each view saw"},
   };
 }
 
@@ -70,7 +69,6 @@ void apply_preset(Preset p, Options& t, double scale) {
   if (p == Preset::fast) {
     t.adam.lr_sh_dc = fast_lr_sh_dc(scale);
     t.spectral_colour_init = true;
-    t.sparse = true;
   }
 }
 
