@@ -15,6 +15,7 @@
 #include "commands.hpp"
 #include "data_options.hpp"
 #include "experiment.hpp"
+#include "live_view.hpp"
 #include "render_dispatch.hpp"
 #include "report.hpp"
 #include "run_sheets.hpp"
@@ -26,7 +27,7 @@ constexpr const char* kUsage =
     "                  [--bands D,MS_G,...] [--seed S] [--orient none|center] [--resume] [--checkpoint-every N]\n"
     "                  [--sheets N] [--adam sparse|dense] [--lr-sh-dc X] [--max-gaussians N]\n"
     "                  [--images NAME] [--eval-every N] [--geometry-band ID]\n"
-    "                  [--exposure [--lr-exposure X]]\n"
+    "                  [--exposure [--lr-exposure X]] [--view [PORT] [--host H]]\n"
     "\n"
     "Train Gaussian splats on a multi-spectral dataset (nerfstudio-style layout, or a COLMAP scene) with one of the\n"
     "paper's strategies, evaluate every band on the eval split and write to DIR:\n"
@@ -76,8 +77,16 @@ constexpr const char* kUsage =
     "  --sheets N        contact sheets of the first N eval captures in the dataset's frame order\n"
     "                    (default 3; 0 = none); written after result.json, which they do not change\n"
     "  --resume          continue from DIR/checkpoints/*.ckpt; the result equals an uninterrupted run\n"
+    "  --view [PORT]     serve the `msgs view` page on the models while they train, at\n"
+    "                    http://127.0.0.1:PORT/ (default 8080; 0 = any free port, printed): a snapshot\n"
+    "                    of the model at most every second, the dataset's cameras and ground truth;\n"
+    "                    with separate/split, the band models trained so far. Results are the same\n"
+    "                    with and without it. When the run finishes the viewer keeps serving until\n"
+    "                    Ctrl-C; a busy port is an error before training starts\n"
+    "  --host H          address --view listens on (default 127.0.0.1; see msgs view --help)\n"
     "Ctrl-C stops after the current step, writes a checkpoint, the models and the metrics (no sheets);\n"
-    "run the same command with --resume to continue.\n";
+    "run the same command with --resume to continue (with --view, Ctrl-C during training also stops the\n"
+    "viewer).\n";
 
 std::atomic<bool> g_stop{false};
 void on_sigint(int) { g_stop.store(true); }
@@ -85,9 +94,9 @@ void on_sigint(int) { g_stop.store(true); }
 using msgs::cli::split_list;
 
 int run_train(const std::vector<std::string>& argv) {
-  const msgs::cli::Args args(argv,
+  const msgs::cli::Args args(msgs::cli::view_option_argv(argv),
                              {"data", "images", "eval-every", "out", "strategy", "scale", "sh-degree", "bands", "seed", "checkpoint-every", "orient", "densify",
-                              "sheets", "max-gaussians", "lr-sh-dc", "adam", "geometry-band", "lr-exposure"},
+                              "sheets", "max-gaussians", "lr-sh-dc", "adam", "geometry-band", "lr-exposure", "view", "host"},
                              {"help", "no-orient", "quiet", "resume", "exposure"});
   if (args.flag("help")) { std::fputs(kUsage, stdout); return 0; }
   if (!args.positional().empty()) throw msgs::cli::UsageError("unexpected argument '" + args.positional()[0] + "'");
@@ -141,6 +150,8 @@ int run_train(const std::vector<std::string>& argv) {
 
   msgs::validate_run(ds, cfg);  // before anything is written: missing bands, no geometry band
   std::vector<std::string> band_ids = cfg.bands.empty() ? ds.bands() : cfg.bands;
+  msgs::SnapshotStore snapshots;  // --view: the models as they train
+  const std::unique_ptr<msgs::cli::LiveView> live = msgs::cli::start_live_view(args, ds, snapshots, cfg, band_ids.size());
   const bool quiet = args.flag("quiet");
   cfg.train.on_progress = [&](const msgs::TrainProgress& p) {
     if (!quiet) msgs::cli::print_progress(p, band_ids, "");
@@ -198,6 +209,7 @@ int run_train(const std::vector<std::string>& argv) {
   } catch (const std::exception& e) {
     std::fprintf(stderr, "msgs train: warning: contact sheets not written: %s\n", e.what());
   }
+  if (live) msgs::cli::serve_after_run(*live, snapshots, res.interrupted, g_stop, on_sigint);
   return res.interrupted ? 130 : 0;
 }
 
