@@ -99,7 +99,7 @@ TEST_CASE("snapshots after every step, read by another thread, leave a Joint run
   cfg.scale = 0.004;  // 480 steps: past the densification floor, so the model grows while snapshotted
   const RunResult plain = run_experiment<kDeg>(tiny(), cfg, out_dir("joint_plain"));
 
-  SnapshotStore store(SnapshotPolicy{1e9, 1});  // every step
+  SnapshotStore store(SnapshotPolicy{.min_seconds = 1e9, .every = 1});  // every step
   cfg.train.on_step = store.hook();
   Reader reader(store);
   const RunResult viewed = run_experiment<kDeg>(tiny(), cfg, out_dir("joint_viewed"));
@@ -134,7 +134,7 @@ TEST_CASE("Separate: one snapshot per band model, in training order, each the mo
   const RunResult plain = run_experiment<kDeg>(tiny(), cfg, out_dir("separate_plain"));
 
   // No time passes between steps as far as this policy is concerned: first and last step only.
-  SnapshotStore store(SnapshotPolicy{1e9, 0});
+  SnapshotStore store(SnapshotPolicy{.min_seconds = 1e9});
   cfg.train.on_step = store.hook();
   const RunResult viewed = run_experiment<kDeg>(tiny(), cfg, out_dir("separate_viewed"));
   check_identical(plain, viewed);
@@ -179,7 +179,7 @@ TEST_CASE("a snapshot handed out never changes; StepView gives the model back on
   CHECK(v.channels == 3);
   CHECK(v.sh_degree == 1);
 
-  SnapshotStore store(SnapshotPolicy{1e9, 0});
+  SnapshotStore store(SnapshotPolicy{.min_seconds = 1e9});
   CHECK(store.latest() == nullptr);
   store.on_step(v);  // first step of model D: taken
   const auto first = store.latest();
@@ -201,4 +201,18 @@ TEST_CASE("a snapshot handed out never changes; StepView gives the model back on
   CHECK(std::get<GaussianModel<G, float>>(first->models[0].model->model).means[0] != 42.0f);
   CHECK(store.latest()->models[0].model->size() == 6);
   CHECK(store.latest()->models[0].model->info.band_names == std::vector<std::string>{"D_R", "D_G", "D_B"});
+
+  // While a reader holds the snapshot before last, the next copy gets buffers of its own; once
+  // nobody holds it, the snapshot before last lends its buffers to the next one.
+  const LoadedModel* s1 = first->models[0].model.get();
+  const LoadedModel* s2 = store.latest()->models[0].model.get();  // no reference kept
+  store.on_step(v);  // step 3 again: the last step, so taken
+  CHECK(store.version() == 3);
+  CHECK(store.latest()->models[0].model.get() != s1);
+  CHECK(first->models[0].model->size() == 4);
+  CHECK(std::get<GaussianModel<G, float>>(first->models[0].model->model).means[0] != 42.0f);
+  store.on_step(v);
+  CHECK(store.version() == 4);
+  CHECK(store.latest()->models[0].model.get() == s2);
+  CHECK(store.latest()->models[0].model->size() == 6);
 }

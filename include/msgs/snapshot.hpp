@@ -5,10 +5,14 @@
 // being trained.
 //
 // Cost: one copy of the model per snapshot (the copy is what keeps training untouched) plus a
-// pointer swap under a mutex; snapshots are taken at most every `min_seconds` (and always after
-// a model's first and last step), so training pays a few milliseconds a second at most.
+// pointer swap under a mutex. The copy goes into the buffers of the snapshot before last when no
+// reader holds it any more (no allocation, no page faults). Snapshots are taken after a model's
+// first and last step and otherwise at most every `min_seconds`, and never so often that copying
+// takes more than `max_share` of the time (a 1M-Gaussian Joint model: every few seconds).
 #pragma once
 
+#include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cstdint>
 #include <functional>
@@ -18,6 +22,7 @@
 #include <optional>
 #include <string>
 #include <utility>
+#include <variant>
 #include <vector>
 
 #include "io/bands.hpp"
@@ -50,21 +55,27 @@ struct TrainSnapshot {
 /// When a snapshot is due.
 struct SnapshotPolicy {
   double min_seconds = 1.0;  ///< at most one snapshot per this many seconds (besides first and last)
+  double max_share = 0.02;   ///< ... and waits at least (last copy's time / max_share) between two
   long long every = 0;       ///< > 0: also every this many steps (tests)
 };
 
 namespace detail {
 
-/// The model behind a StepView as an AnyModel copy; std::invalid_argument for a type that
-/// AnyModel cannot hold.
+/// Copy the model behind a StepView into `dst`, into its buffers when it holds the same type;
+/// std::invalid_argument for a type that AnyModel cannot hold.
 template <int C, int D = 0>
-AnyModel copy_step_model(const StepView& v) {
+void copy_step_model(const StepView& v, AnyModel& dst) {
   if constexpr (D <= 3) {
-    if (const auto* m = v.model<Gaussian<C, D>>()) return AnyModel(*m);
-    return copy_step_model<C, D + 1>(v);
+    using M = GaussianModel<Gaussian<C, D>, float>;
+    if (const M* m = v.model<Gaussian<C, D>>()) {
+      if (M* d = std::get_if<M>(&dst)) *d = *m;  // vectors keep their capacity
+      else dst = *m;
+      return;
+    }
+    copy_step_model<C, D + 1>(v, dst);
   } else {
-    if constexpr (C == 1) return copy_step_model<3, 0>(v);
-    else if constexpr (C == 3) return copy_step_model<7, 0>(v);
+    if constexpr (C == 1) copy_step_model<3, 0>(v, dst);
+    else if constexpr (C == 3) copy_step_model<7, 0>(v, dst);
     else
       throw std::invalid_argument("snapshot: a model of " + std::to_string(v.channels) + " channels and SH degree " +
                                   std::to_string(v.sh_degree) + " cannot be viewed");
@@ -104,13 +115,15 @@ class SnapshotStore {
     const std::string key = v.key.empty() ? "model" : v.key;
     const bool first = key != last_key_;
     const bool last = v.step >= v.end;
-    const bool timed = std::chrono::duration<double>(now - last_time_).count() >= policy_.min_seconds;
+    const double wait = std::max(policy_.min_seconds, policy_.max_share > 0 ? last_cost_ / policy_.max_share : 0.0);
+    const bool timed = std::chrono::duration<double>(now - last_time_).count() >= wait;
     const bool counted = policy_.every > 0 && v.step % policy_.every == 0;
     if (!(first || last || timed || counted)) return;
     take(v, key);
     last_key_ = key;
     last_time_ = clock::now();
     const double s = std::chrono::duration<double>(last_time_ - now).count();
+    last_cost_ = s;
     std::lock_guard<std::mutex> lock(mutex_);
     ++stats_.count;
     stats_.seconds += s;
@@ -119,23 +132,41 @@ class SnapshotStore {
 
   /// Snapshot the model of `v` now.
   void take(const StepView& v, const std::string& key) {
-    auto lm = std::make_shared<LoadedModel>();
+    // The snapshot before last of this model, when no reader holds it any more, lends its buffers.
+    std::shared_ptr<LoadedModel> lm;
+    if (spare_ && spare_key_ == key && spare_.use_count() == 1) {
+      std::atomic_thread_fence(std::memory_order_acquire);  // the last reader's release is seen
+      lm = std::move(spare_);
+    } else {
+      lm = std::make_shared<LoadedModel>();
+    }
+    spare_.reset();
     lm->path = "model_" + key + ".ply";
     lm->info.vertices = v.gaussians;
     lm->info.gaussian = true;
     lm->info.channels = v.channels;
     lm->info.sh_degree = v.sh_degree;
     lm->info.band_names = detail::step_channel_names(v);
-    lm->model = detail::copy_step_model<1>(v);  // the copy: the only part that costs
+    detail::copy_step_model<1>(v, lm->model);  // the copy: the only part that costs
     ModelSnapshot ms{key, v.step, v.begin, v.end, std::move(lm)};
 
-    std::lock_guard<std::mutex> lock(mutex_);
-    auto next = std::make_shared<TrainSnapshot>(latest_ ? *latest_ : TrainSnapshot{});
-    next->version = ++version_;
-    auto it = std::find_if(next->models.begin(), next->models.end(), [&](const ModelSnapshot& m) { return m.key == key; });
-    if (it == next->models.end()) next->models.push_back(std::move(ms));
-    else *it = std::move(ms);
-    latest_ = std::move(next);
+    std::shared_ptr<const LoadedModel> previous;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      auto next = std::make_shared<TrainSnapshot>(latest_ ? *latest_ : TrainSnapshot{});
+      next->version = ++version_;
+      auto it = std::find_if(next->models.begin(), next->models.end(), [&](const ModelSnapshot& m) { return m.key == key; });
+      if (it == next->models.end()) {
+        next->models.push_back(std::move(ms));
+      } else {
+        previous = std::move(it->model);
+        *it = std::move(ms);
+      }
+      latest_ = std::move(next);
+    }
+    // Made non-const by this store, handed out as const: writable again once nobody else holds it.
+    spare_ = std::const_pointer_cast<LoadedModel>(std::move(previous));
+    spare_key_ = key;
   }
 
   /// The latest snapshots (nullptr before the first one). The result stays valid and unchanged
@@ -158,6 +189,9 @@ class SnapshotStore {
   // Training thread only.
   std::string last_key_;
   std::chrono::steady_clock::time_point last_time_{};
+  double last_cost_ = 0;                  ///< seconds the last snapshot took
+  std::shared_ptr<LoadedModel> spare_;    ///< the snapshot before the latest of model spare_key_
+  std::string spare_key_;
   // Shared, under mutex_.
   mutable std::mutex mutex_;
   std::shared_ptr<const TrainSnapshot> latest_;
