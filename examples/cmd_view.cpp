@@ -41,7 +41,9 @@ constexpr const char* kUsage =
     MSGS_DATA_OPTIONS_USAGE
     "\n"
     "HTTP API (GET; errors are JSON {\"error\": ...} with status 400, 404 or 422):\n"
-    "  /                   the viewer page (self-contained, no external scripts)\n"
+    "  /                   the viewer page (self-contained, no external scripts); deep links\n"
+    "                      ?frame=ID&mode=M&size=W&bg=eval|black|white&format=png open it at a\n"
+    "                      dataset camera in a mode, W pixels wide\n"
     "  /api/info           JSON: Gaussians, bands, modes, colour scales, scene extent, dataset cameras\n"
     "  /api/render         width, height, fx [fy cx cy] | fovy, R (9, row-major) + t (3) world-to-camera\n"
     "                      in OpenCV axes | eye + target [+ up], mode, bg, gain, format, quality\n"
