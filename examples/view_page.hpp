@@ -368,7 +368,7 @@ function updateLegend() {
 function gainValue() { return Math.pow(2, parseFloat($("gain").value)); }
 
 // ---- camera list ----
-function fillCameras() {
+function fillCameras(scroll = true) {
   const rows = $("camRows");
   rows.innerHTML = "";
   const band = $("fBand").value, split = $("fSplit").value;
@@ -383,13 +383,13 @@ function fillCameras() {
     tr.onclick = () => jump(i);
     rows.appendChild(tr);
   });
-  highlightCamera();
+  highlightCamera(scroll);
 }
-function highlightCamera() {
+function highlightCamera(scroll = true) {
   for (const tr of $("camRows").children) {
     const on = Number(tr.dataset.id) === selected;
     tr.classList.toggle("sel", on);
-    if (on) tr.scrollIntoView({ block: "nearest" });
+    if (on && scroll) tr.scrollIntoView({ block: "nearest" });
   }
 }
 function stepCamera(d) {
@@ -496,9 +496,15 @@ async function pollLive() {
     showLive(L);
     if (L.version > 0 && L.version !== liveVersion) {
       try {
+        const was = info;
         info = await fetchInfo();
         liveVersion = L.version;
-        fillModes(); updateLegend(); fillCameras();
+        // Rebuild the mode list and the camera table only when a band model appeared (Separate,
+        // Split): rebuilding would close an open drop-down or scroll the page every second.
+        const modesSig = i => i.modes.map(m => m.available ? 1 : 0).join("");
+        const camsSig = i => i.cameras.map(c => c.rendered ? 1 : 0).join("");
+        if (modesSig(was) !== modesSig(info)) { fillModes(); updateLegend(); }
+        if (camsSig(was) !== camsSig(info)) fillCameras(false);
         moved(true);  // the same camera, the new model
         if (selected >= 0 && $("compare").style.display !== "none") showCompare(selected);
       } catch (e) { /* the next poll tries again */ }
