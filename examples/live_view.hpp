@@ -79,7 +79,7 @@ inline std::unique_ptr<LiveView> start_live_view(const Args& args, const io::Dat
   const TrainPlan plan = parse_strategy(cfg.strategy).plan;
   opt.strategy = plan.name;
   opt.expected_models = plan.kind == StrategyKind::Joint ? 1 : bands;
-#if MSGS_HAVE_VIEW
+#ifdef MSGS_HAVE_VIEW
   std::unique_ptr<LiveView> live = LiveView::start(ds, store, opt);
   cfg.train.on_step = store.hook();
   if (!(opt.host == "127.0.0.1" || opt.host == "localhost" || opt.host == "::1"))
