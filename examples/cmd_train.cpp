@@ -19,21 +19,26 @@
 #include "render_dispatch.hpp"
 #include "report.hpp"
 #include "run_sheets.hpp"
+#include "train_options.hpp"
 
 namespace {
 
 constexpr const char* kUsage =
     "usage: msgs train --data DIR --out DIR [--strategy NAME] [--scale F] [--sh-degree D]\n"
     "                  [--bands D,MS_G,...] [--seed S] [--orient none|center] [--resume] [--checkpoint-every N]\n"
-    "                  [--sheets N] [--adam sparse|dense] [--lr-sh-dc X] [--max-gaussians N]\n"
-    "                  [--images NAME] [--eval-every N] [--geometry-band ID]\n"
-    "                  [--exposure [--lr-exposure X]] [--view [PORT] [--host H]]\n"
+    "                  [--sheets N] [--max-gaussians N] [--images NAME] [--eval-every N] [--geometry-band ID]\n"
+    "                  [--exposure [--lr-exposure X]] [--preset reference|fast] [--ssim valid|same]\n"
+    "                  [--no-clamp] [--shuffle every-pass|once] [--adam sparse|dense] [--lr-sh-dc X]\n"
+    "                  [--eval-every-seconds T] [--eval-every-steps N] [--eval-images K]\n"
+    "                  [--view [PORT] [--host H]]\n"
     "\n"
     "Train Gaussian splats on a multi-spectral dataset (nerfstudio-style layout, or a COLMAP scene) with one of the\n"
     "paper's strategies, evaluate every band on the eval split and write to DIR:\n"
     "  model_<key>.ply   one per model (joint, or one per band for separate/split)\n"
     "  result.json       configuration, per-band metrics, Gaussian counts, time per stage\n"
     "  metrics.md        the per-band table in the paper's layout\n"
+    "  curve.csv         with --eval-every-seconds/-steps: seconds, step, model, Gaussians, band,\n"
+    "                    PSNR, SSIM of every anytime evaluation, plus the run's All rows\n"
     "  sheets/sheet_<n>.png  contact sheets of the first N eval captures (see --sheets), after a\n"
     "                    finished run: a row per band of ground truth | render | error, then CIR,\n"
     "                    NDVI and NDRE of ground truth | render | difference (as `msgs eval`)\n"
@@ -53,12 +58,7 @@ constexpr const char* kUsage =
     "                    another, e.g. MS_NIR); other strategies ignore it\n"
     "  --max-gaussians N densification grows each model to at most N Gaussians, largest\n"
     "                    gradients first (default 0: no limit)\n"
-    "  --lr-sh-dc X      Adam learning rate of the SH DC (base colour) coefficients (default 0.0025,\n"
-    "                    the reference's); short schedules may need more: see README\n"
-    "  --adam MODE       dense (default: every Gaussian each step, zero gradient where the view did\n"
-    "                    not see it: torch's Adam, the reference implementation's behaviour) or sparse\n"
-    "                    (gradients, Adam and the scale regulariser only for the Gaussians the view\n"
-    "                    saw; unseen ones and their moments stay: faster, a different optimisation)\n"
+    MSGS_TRAIN_OPTIONS_USAGE
     "  --exposure        learn a per-image exposure correction: a gain exp(a_c) and an offset b_c per\n"
     "                    channel of every training image, applied to its render before the loss\n"
     "                    (Adam, only the sampled image's values per step; each band's mean log-gain\n"
@@ -95,10 +95,13 @@ void on_sigint(int) { g_stop.store(true); }
 using msgs::cli::split_list;
 
 int run_train(const std::vector<std::string>& argv) {
-  const msgs::cli::Args args(msgs::cli::view_option_argv(argv),
-                             {"data", "images", "eval-every", "out", "strategy", "scale", "sh-degree", "bands", "seed", "checkpoint-every", "orient", "densify",
-                              "sheets", "max-gaussians", "lr-sh-dc", "adam", "geometry-band", "lr-exposure", "view", "host"},
-                             {"help", "no-orient", "quiet", "resume", "exposure"});
+  std::vector<std::string> values = {"data", "images", "eval-every", "out", "strategy", "scale", "sh-degree", "bands", "seed",
+                                     "checkpoint-every", "orient", "densify", "sheets", "max-gaussians", "geometry-band",
+                                     "lr-exposure", "view", "host"};
+  std::vector<std::string> flags = {"help", "no-orient", "quiet", "resume", "exposure"};
+  for (const auto& k : msgs::cli::train_option_values()) values.push_back(k);
+  for (const auto& k : msgs::cli::train_option_flags()) flags.push_back(k);
+  const msgs::cli::Args args(msgs::cli::view_option_argv(argv), values, flags);
   if (args.flag("help")) { std::fputs(kUsage, stdout); return 0; }
   if (!args.positional().empty()) throw msgs::cli::UsageError("unexpected argument '" + args.positional()[0] + "'");
   const std::filesystem::path data = args.require("data"), out = args.require("out");
@@ -110,14 +113,8 @@ int run_train(const std::vector<std::string>& argv) {
   if (deg < 0 || deg > 3) throw msgs::cli::UsageError("--sh-degree must be 0..3");
   cfg.bands = split_list(args.get("bands"));
   cfg.geometry_band = args.get("geometry-band", "D");
+  msgs::cli::apply_train_options(args, cfg);
   cfg.train.seed = std::uint64_t(args.integer("seed", 0));
-  cfg.train.adam.lr_sh_dc = args.number("lr-sh-dc", cfg.train.adam.lr_sh_dc);
-  if (!(std::isfinite(cfg.train.adam.lr_sh_dc) && cfg.train.adam.lr_sh_dc > 0))
-    throw msgs::cli::UsageError("--lr-sh-dc must be a finite number > 0");
-  const std::string adam_mode = args.get("adam", "dense");
-  if (adam_mode != "sparse" && adam_mode != "dense")
-    throw msgs::cli::UsageError("--adam must be sparse or dense, got '" + adam_mode + "'");
-  cfg.train.sparse = adam_mode == "sparse";
   cfg.train.exposure = args.flag("exposure");
   if (args.has("lr-exposure") && !cfg.train.exposure) throw msgs::cli::UsageError("--lr-exposure needs --exposure");
   cfg.train.lr_exposure = args.number("lr-exposure", cfg.train.lr_exposure);
@@ -173,7 +170,8 @@ int run_train(const std::vector<std::string>& argv) {
   j["sh_degree"] = deg;
   j["seed"] = cfg.train.seed;
   j["lr_sh_dc"] = cfg.train.adam.lr_sh_dc;
-  j["adam"] = adam_mode;
+  j["adam"] = cfg.train.sparse ? "sparse" : "dense";
+  j["options"] = msgs::cli::train_options_json(args, cfg);
   j["geometry_band"] = cfg.geometry_band;
   j["layout"] = msgs::io::detect_scene(data).describe(data);
   j["images"] = args.get("images", "images");
@@ -181,10 +179,12 @@ int run_train(const std::vector<std::string>& argv) {
                                    [](const msgs::io::Frame& f) { return f.split == msgs::io::Split::eval; });
   if (cfg.train.exposure) j["lr_exposure"] = cfg.train.lr_exposure;
   j["transform"] = std::vector<float>(ds.transform.data(), ds.transform.data() + 16);
+  if (!res.curve.empty()) msgs::io::write_text_atomic(out / "curve.csv", msgs::cli::curve_csv(res));
   msgs::io::write_text_atomic(out / "result.json", j.dump(2) + "\n");
   const std::string table = msgs::cli::metrics_markdown(res.metrics);
   msgs::io::write_text_atomic(out / "metrics.md", "# " + res.strategy + "\n\n" + table);
-  std::printf("\n%s  (%lld steps, %.1f s)\n%s", res.strategy.c_str(), res.steps, res.seconds, table.c_str());
+  std::printf("\n%s  (%lld steps, %.1f s; %.1f s of training)\n%s", res.strategy.c_str(), res.steps, res.seconds,
+              res.train_seconds, table.c_str());
   std::printf("Gaussians:");
   for (const auto& [k, n] : res.gaussians) std::printf(" %s %zu", k.c_str(), n);
   const auto& t = res.times;

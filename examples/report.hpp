@@ -127,6 +127,49 @@ inline nlohmann::json plan_json(const TrainPlan& p) {
             {"pause_end", d.pause_end}, {"max_gaussians", d.max_gaussians}}}};
 }
 
+/// The anytime-evaluation curve: one object per point (seconds on the training clock, step, model,
+/// Gaussians, PSNR / SSIM per band), and the run's All curve over every band (curve.hpp, all_curve).
+inline nlohmann::json curve_json(const RunResult& r) {
+  auto num = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
+  nlohmann::json points = nlohmann::json::array();
+  for (const CurvePoint& p : r.curve) {
+    nlohmann::json psnr = nlohmann::json::object(), ssim = nlohmann::json::object();
+    for (std::size_t b = 0; b < p.bands.size(); ++b) {
+      psnr[p.bands[b]] = num(p.psnr[b]);
+      ssim[p.bands[b]] = num(p.ssim[b]);
+    }
+    points.push_back({{"seconds", p.seconds}, {"step", p.step}, {"model", p.model}, {"gaussians", p.gaussians},
+                      {"psnr", psnr}, {"ssim", ssim}});
+  }
+  std::vector<std::string> bands;
+  for (const auto& m : r.metrics) bands.push_back(m.band);
+  nlohmann::json all = nlohmann::json::array();
+  for (const AllPoint& a : all_curve(r.curve, bands))
+    all.push_back({{"seconds", a.seconds}, {"step", a.step}, {"gaussians", a.gaussians}, {"psnr", num(a.psnr)},
+                   {"ssim", num(a.ssim)}});
+  return {{"points", points}, {"all", all}};
+}
+
+/// The curve as CSV, one row per point and band plus the run's All rows:
+/// seconds,step,model,gaussians,band,psnr,ssim.
+inline std::string curve_csv(const RunResult& r) {
+  std::string s = "seconds,step,model,gaussians,band,psnr,ssim\n";
+  char buf[256];
+  for (const CurvePoint& p : r.curve)
+    for (std::size_t b = 0; b < p.bands.size(); ++b) {
+      std::snprintf(buf, sizeof buf, "%.3f,%lld,%s,%zu,%s,%.4f,%.5f\n", p.seconds, p.step, p.model.c_str(), p.gaussians,
+                    p.bands[b].c_str(), p.psnr[b], p.ssim[b]);
+      s += buf;
+    }
+  std::vector<std::string> bands;
+  for (const auto& m : r.metrics) bands.push_back(m.band);
+  for (const AllPoint& a : all_curve(r.curve, bands)) {
+    std::snprintf(buf, sizeof buf, "%.3f,%lld,all,%zu,All,%.4f,%.5f\n", a.seconds, a.step, a.gaussians, a.psnr, a.ssim);
+    s += buf;
+  }
+  return s;
+}
+
 inline nlohmann::json result_json(const RunResult& r) {
   nlohmann::json j;
   j["strategy"] = r.strategy;
@@ -138,10 +181,12 @@ inline nlohmann::json result_json(const RunResult& r) {
   j["models"] = models;
   j["times"] = times_json(r.times);
   j["seconds"] = r.seconds;
+  j["train_seconds"] = r.train_seconds;
   j["steps"] = r.steps;
   j["interrupted"] = r.interrupted;
   j["exposure"] = r.exposure;
   if (r.exposure) j["exposure_correction"] = exposure_json(r);
+  if (!r.curve.empty()) j["curve"] = curve_json(r);
   return j;
 }
 

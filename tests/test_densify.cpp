@@ -533,6 +533,13 @@ TEST_CASE("refine timing: start, period, pause window, after-reset window, stop"
   CHECK_FALSE(dc.refines_at(29100));  // pause window (29000, 32000]
   CHECK_FALSE(dc.refines_at(31800));
   CHECK(dc.refines_at(32100));
+  // Opacity resets stop in the pause too (the reference's rule): move a reset step into a window.
+  DensifyConfig reset_cfg = DensifyConfig::msad();
+  CHECK(DensityControl(reset_cfg, 5, 100).resets_opacity_at(9000));
+  reset_cfg.pause_begin = 8999;
+  reset_cfg.pause_end = 9001;
+  CHECK_FALSE(DensityControl(reset_cfg, 5, 100).resets_opacity_at(9000));
+  CHECK(DensityControl(reset_cfg, 5, 100).resets_opacity_at(18000));
   CHECK(dc.refines_at(59700));
   CHECK_FALSE(dc.refines_at(60000));  // stop
   CHECK(dc.accumulates_at(29000));

@@ -28,12 +28,16 @@ double ref_window(int du, int dv) {
   return g[du + 5] * g[dv + 5];
 }
 
-double ref_ssim(const Image<double>& x, const Image<double>& y) {
+// `valid`: pytorch-msssim's mean over the pixels whose window fits (a dimension shorter than 11
+// keeps every pixel, zero padded).
+double ref_ssim(const Image<double>& x, const Image<double>& y, bool valid = false) {
   const double c1 = 1e-4, c2 = 9e-4;
+  const int mx0 = valid && x.width >= 11 ? 5 : 0, mx1 = valid && x.width >= 11 ? x.width - 5 : x.width;
+  const int my0 = valid && x.height >= 11 ? 5 : 0, my1 = valid && x.height >= 11 ? x.height - 5 : x.height;
   double total = 0;
   for (int c = 0; c < x.channels; ++c)
-    for (int py = 0; py < x.height; ++py)
-      for (int px = 0; px < x.width; ++px) {
+    for (int py = my0; py < my1; ++py)
+      for (int px = mx0; px < mx1; ++px) {
         double mx = 0, my = 0, exx = 0, eyy = 0, exy = 0;
         for (int dv = -5; dv <= 5; ++dv)
           for (int du = -5; du <= 5; ++du) {
@@ -45,14 +49,14 @@ double ref_ssim(const Image<double>& x, const Image<double>& y) {
         const double sxx = exx - mx * mx, syy = eyy - my * my, sxy = exy - mx * my;
         total += ((2 * mx * my + c1) * (2 * sxy + c2)) / ((mx * mx + my * my + c1) * (sxx + syy + c2));
       }
-  return total / static_cast<double>(x.size());
+  return total / (double(mx1 - mx0) * double(my1 - my0) * double(x.channels));
 }
 
-double ref_loss(const Image<double>& x, const Image<double>& y) {
+double ref_loss(const Image<double>& x, const Image<double>& y, bool valid = false) {
   double l1 = 0;
   for (std::size_t i = 0; i < x.size(); ++i) l1 += std::abs(x.data[i] - y.data[i]);
   l1 /= static_cast<double>(x.size());
-  return 0.8 * l1 + 0.2 * (1.0 - ref_ssim(x, y));
+  return 0.8 * l1 + 0.2 * (1.0 - ref_ssim(x, y, valid));
 }
 
 template <class S>
@@ -141,6 +145,48 @@ TEST_CASE("photometric loss gradient matches central differences of the referenc
       const double lp = ref_loss(x, y);
       x.data[i] = x0 - h;
       const double lm = ref_loss(x, y);
+      x.data[i] = x0;
+      const double fd = (lp - lm) / (2 * h);
+      max_err = std::max(max_err, std::abs(fd - grad.data[i]));
+      max_g = std::max(max_g, std::abs(fd));
+    }
+    CAPTURE(max_g);
+    CHECK(max_err < 1e-8 + 1e-5 * max_g);
+  }
+}
+
+TEST_CASE("valid-window SSIM (pytorch-msssim) matches the direct reference, value and gradient") {
+  const Size3 sizes[] = {{4, 4, 3}, {11, 11, 1}, {12, 5, 3}, {5, 14, 1}, {17, 13, 7}, {24, 16, 3}};
+  std::uint32_t seed = 300;
+  msgs::PhotometricLossConfig cfg;
+  cfg.ssim_border = msgs::SsimBorder::valid;
+  msgs::SsimWorkspace<double> ws;  // shared across sizes and modes: stale borders must not leak
+  for (const auto& s : sizes) {
+    CAPTURE(s.w); CAPTURE(s.h); CAPTURE(s.c);
+    auto x = random_image<double>(s.w, s.h, s.c, seed++);
+    auto y = random_image<double>(s.w, s.h, s.c, seed++);
+    for (std::size_t i = 0; i < y.size(); ++i) y.data[i] = 0.7 * x.data[i] + 0.3 * y.data[i];
+    for (std::size_t i = 0; i < x.size(); ++i)
+      if (std::abs(x.data[i] - y.data[i]) < 1e-3) x.data[i] += 2e-3;
+    const double ref = ref_ssim(x, y, true);
+    CHECK(msgs::ssim(x, y, msgs::SsimBorder::valid) == doctest::Approx(ref).epsilon(1e-12));
+    if (s.w >= 11 && s.h >= 11) CHECK(std::abs(ref - ref_ssim(x, y, false)) > 1e-6);  // the modes differ
+    const auto pc = msgs::ssim_per_channel(x, y, msgs::SsimBorder::valid);
+    double m = 0;
+    for (double v : pc) m += v;
+    CHECK(m / s.c == doctest::Approx(ref).epsilon(1e-12));
+    Image<double> grad;
+    (void)msgs::photometric_loss(x, y, &grad, ws);  // same mode first, to dirty the workspace
+    const double value = msgs::photometric_loss(x, y, &grad, ws, cfg);
+    CHECK(value == doctest::Approx(ref_loss(x, y, true)).epsilon(1e-12));
+    const double h = 1e-6;
+    double max_err = 0, max_g = 0;
+    for (std::size_t i = 0; i < x.size(); ++i) {
+      const double x0 = x.data[i];
+      x.data[i] = x0 + h;
+      const double lp = ref_loss(x, y, true);
+      x.data[i] = x0 - h;
+      const double lm = ref_loss(x, y, true);
       x.data[i] = x0;
       const double fd = (lp - lm) / (2 * h);
       max_err = std::max(max_err, std::abs(fd - grad.data[i]));

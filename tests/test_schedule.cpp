@@ -121,13 +121,13 @@ TEST_CASE("random training background is a pure function of the step") {
 TEST_CASE("evaluation background: grey for RGB, its BT.601 luminance for one channel") {
   const auto rgb = eval_background<double>(3);
   REQUIRE(rgb.size() == 3);
-  CHECK(rgb[0] == doctest::Approx(0.149));
-  CHECK(rgb[1] == doctest::Approx(0.165));
-  CHECK(rgb[2] == doctest::Approx(0.216));
+  CHECK(rgb[0] == 0.1490);  // splatfacto's torch.tensor([0.1490, 0.1647, 0.2157]), not rounded
+  CHECK(rgb[1] == 0.1647);
+  CHECK(rgb[2] == 0.2157);
   const auto grey = eval_background<double>(1);
   REQUIRE(grey.size() == 1);
-  CHECK(grey[0] == doctest::Approx(0.299 * 0.149 + 0.587 * 0.165 + 0.114 * 0.216));
-  CHECK(grey[0] == doctest::Approx(0.166030).epsilon(1e-5));
+  CHECK(grey[0] == doctest::Approx(0.299 * 0.1490 + 0.587 * 0.1647 + 0.114 * 0.2157));
+  CHECK(grey[0] == doctest::Approx(0.1658197).epsilon(1e-6));
   CHECK_THROWS_AS(eval_background<float>(7), std::invalid_argument);
 }
 
@@ -181,4 +181,39 @@ TEST_CASE("band sampling is deterministic and resumable") {
   CHECK_THROWS_AS(BandSampler(std::vector<std::vector<int>>{{1}, {}}), std::invalid_argument);
   CHECK_THROWS_AS(a.at(-1), std::invalid_argument);
   CHECK_THROWS_AS(BandSampler().at(0), std::logic_error);
+}
+
+TEST_CASE("band sampling with a reshuffle on every pass (the reference's order)") {
+  const std::vector<std::vector<int>> lists = {{100, 101, 102, 103, 104, 105}, {200, 201, 202}, {300, 301, 302, 303}};
+  const BandSampler once(lists, 42, Shuffle::once);
+  const BandSampler every(lists, 42, Shuffle::every_pass);
+  const BandSampler again(lists, 42, Shuffle::every_pass);  // a resumed run
+  CHECK(every.mode() == Shuffle::every_pass);
+  // The first pass of every band is the shuffle-once order.
+  for (long long t = 0; t < 3 * 3; ++t) CHECK(every.at(t) == once.at(t));
+  // Each pass of each band is a permutation of its list, in its own order; bands stay round-robin.
+  for (std::size_t b = 0; b < lists.size(); ++b) {
+    const long long n = static_cast<long long>(lists[b].size());
+    std::vector<std::vector<int>> passes;
+    for (long long pass = 0; pass < 20; ++pass) {
+      std::vector<int> order;
+      for (long long k = 0; k < n; ++k) {
+        const long long t = (pass * n + k) * 3 + static_cast<long long>(b);
+        const auto d = every.at(t);
+        CHECK(d.band == static_cast<int>(b));
+        CHECK(d == again.at(t));
+        order.push_back(d.image);
+      }
+      std::vector<int> sorted = order;
+      std::sort(sorted.begin(), sorted.end());
+      CHECK(sorted == lists[b]);
+      passes.push_back(order);
+    }
+    // Reshuffled: with 20 passes of 3..6 images, the orders are not all the same.
+    CHECK(std::any_of(passes.begin(), passes.end(), [&](const std::vector<int>& o) { return o != passes[0]; }));
+  }
+  // Shuffle::once repeats itself after period(); every_pass does not.
+  bool differs = false;
+  for (long long t = 0; t < once.period(); ++t) differs = differs || !(every.at(t + 5 * once.period()) == once.at(t));
+  CHECK(differs);
 }

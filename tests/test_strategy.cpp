@@ -159,7 +159,7 @@ TEST_CASE("plans at scale 1 carry the paper's counts") {
   CHECK(opt.spectral_start == 30000);
   CHECK(opt.spectral_geometry_start == 32000);
   CHECK(opt.densify.pause_begin == 29000);
-  CHECK(opt.densify.pause_end == 32000);
+  CHECK(opt.densify.pause_end == 32001);  // the reference's 29000 32001: steps 29001..32001
 }
 
 TEST_CASE("the schedule scale reaches every count of every plan") {
@@ -189,7 +189,7 @@ TEST_CASE("the schedule scale reaches every count of every plan") {
   CHECK(sd.spectral_start == 1500);
   CHECK(sd.spectral_geometry_start == 1600);
   CHECK(sd.densify.pause_begin == 1450);
-  CHECK(sd.densify.pause_end == 1600);
+  CHECK(sd.densify.pause_end == 1601);
   CHECK(sd.densify.refine_stop == 750);  // SpecDelay alone keeps the baseline stop
 
   CHECK(parse_strategy("joint+extadc", s).plan.densify.refine_stop == 3000);

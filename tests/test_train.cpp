@@ -258,7 +258,7 @@ TEST_CASE("SpecDelay: no densification statistics and no refinement in (pause_be
     };
     StrategySpec s = parse_strategy("joint+specdelay+msad", ScheduleScale{0.05});
     REQUIRE(s.plan.densify.pause_begin == 1450);
-    REQUIRE(s.plan.densify.pause_end == 1600);
+    REQUIRE(s.plan.densify.pause_end == 1601);
     if (!with_pause) s.plan.densify.pause_begin = s.plan.densify.pause_end = 0;
     Trainer<G> tr(tiny(), joint_bands(), initial_model(), s.plan, s.hooks, opt);
     auto total_count = [&] {

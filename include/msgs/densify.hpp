@@ -563,9 +563,11 @@ class DensityControl {
     return cfg_.reset_every <= 0 || step % cfg_.reset_every >= pause_after_reset_;
   }
 
-  /// Whether `step` resets opacities: a positive multiple of reset_every before refine_stop.
+  /// Whether `step` resets opacities: a positive multiple of reset_every before refine_stop and
+  /// outside the pause window (the reference stops resets there too).
   bool resets_opacity_at(long long step) const {
-    return cfg_.reset_every > 0 && step > 0 && step % cfg_.reset_every == 0 && step < cfg_.refine_stop;
+    return cfg_.reset_every > 0 && step > 0 && step % cfg_.reset_every == 0 && step < cfg_.refine_stop &&
+           !paused_at(step);
   }
 
   /// Forget the statistics, for a model of `n` Gaussians changed outside this class.

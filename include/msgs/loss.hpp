@@ -10,6 +10,8 @@
 #include <stdexcept>
 #include <string>
 #include <cstdint>
+#include <tuple>
+#include <utility>
 #include <vector>
 
 #ifdef _OPENMP
@@ -34,6 +36,24 @@ inline constexpr double ssim_sigma = 1.5;
 /// SSIM stabilisers for a dynamic range of 1: C1 = (0.01)^2, C2 = (0.03)^2.
 inline constexpr double ssim_c1 = 0.01 * 0.01;
 inline constexpr double ssim_c2 = 0.03 * 0.03;
+
+/// Which pixels the SSIM mean runs over.
+enum class SsimBorder {
+  /// Every pixel, the window summing over the zero-padded images ("same" convolution): the 3DGS
+  /// reference, `F.conv2d(..., padding=5, groups=C)`.
+  same,
+  /// Only the pixels whose whole 11x11 window lies inside the image ("valid" convolution, no
+  /// padding): pytorch-msssim's `ssim(..., data_range=1)`, which the multi-spectral implementation
+  /// uses in its loss and evaluation. An image dimension shorter than the window keeps all its
+  /// pixels (pytorch-msssim skips filtering along it; msgs filters it with zero padding).
+  valid,
+};
+
+/// The pixels [lo, hi) along a dimension of `n` pixels that a `border` SSIM mean covers.
+inline std::pair<int, int> ssim_covered(int n, SsimBorder border) {
+  if (border == SsimBorder::valid && n >= ssim_window_size) return {ssim_window_radius, n - ssim_window_radius};
+  return {0, n};
+}
 
 /// The normalised 1-D SSIM window; the 2-D window is its outer product, so filtering separates.
 template <class S>
@@ -60,6 +80,12 @@ struct SsimWorkspace {
   std::vector<double> row_sums;       ///< [H, C] sum over x of the SSIM map, per row and channel
   std::vector<std::vector<S>> thread_scratch;  ///< one per OpenMP thread: row ring and row buffers
   bool has_bwd_state = false;         ///< d_* hold the maps of the last forward
+  /// The pixels the last forward averaged over (ssim_covered): rows [r_lo, r_hi), columns [c_lo, c_hi).
+  int r_lo = 0, r_hi = 0, c_lo = 0, c_hi = 0;
+  /// Number of values the last forward averaged over: (r_hi - r_lo) (c_hi - c_lo) C.
+  std::size_t covered() const {
+    return static_cast<std::size_t>(r_hi - r_lo) * static_cast<std::size_t>(c_hi - c_lo) * static_cast<std::size_t>(channels);
+  }
 
   /// Row stride of the derivative maps.
   std::ptrdiff_t map_stride() const {
@@ -264,18 +290,21 @@ inline double strided_sum(const S* p, std::ptrdiff_t count, std::ptrdiff_t strid
 
 /// SSIM forward: mean over pixels and channels of the SSIM map of `x` against `y` ([H, W, C], any C),
 /// the 11x11 Gaussian window summing over the zero-padded images ("same" convolution, as the 3DGS
-/// reference `F.conv2d(..., padding=5, groups=C)`). With `keep_for_bwd` the per-pixel partial
-/// derivatives of the map are kept in `ws` for `ssim_bwd`. `per_channel` (optional) receives the mean
-/// over pixels of each channel. Deterministic whatever the thread count: every row is computed by the
-/// same operations, and reductions run in row order. An empty image gives 0.
+/// reference `F.conv2d(..., padding=5, groups=C)`); with SsimBorder::valid the mean runs over the
+/// pixels whose window lies inside the image only (pytorch-msssim). With `keep_for_bwd` the per-pixel
+/// partial derivatives of the map are kept in `ws` for `ssim_bwd`. `per_channel` (optional) receives
+/// the mean over pixels of each channel. Deterministic whatever the thread count: every row is
+/// computed by the same operations, and reductions run in row order. An empty image gives 0.
 template <class S>
 double ssim_fwd(const Image<S>& x, const Image<S>& y, SsimWorkspace<S>& ws, bool keep_for_bwd = false,
-                std::vector<double>* per_channel = nullptr) {
+                std::vector<double>* per_channel = nullptr, SsimBorder border = SsimBorder::same) {
   detail::check_image("ssim", "x", x);
   detail::check_image("ssim", "y", y);
   detail::check_same_shape("ssim", x.width, x.height, x.channels, y.width, y.height, y.channels);
   const int W = x.width, H = x.height, C = x.channels;
   ws.resize(W, H, C, keep_for_bwd);
+  std::tie(ws.r_lo, ws.r_hi) = ssim_covered(H, border);
+  std::tie(ws.c_lo, ws.c_hi) = ssim_covered(W, border);
   if (per_channel) per_channel->assign(static_cast<std::size_t>(C), 0.0);
   if (x.data.empty()) {
     ws.has_bwd_state = keep_for_bwd;
@@ -317,9 +346,19 @@ double ssim_fwd(const Image<S>& x, const Image<S>& y, SsimWorkspace<S>& ws, bool
                                      ws.d_exy.data() + o);
         else
           detail::ssim_map_row<false, S>(st, len, c1, c2, smap, nullptr, nullptr, nullptr);
+        const bool row_covered = r >= ws.r_lo && r < ws.r_hi;
+        if (keep_for_bwd && (!row_covered || ws.c_lo > 0 || ws.c_hi < W)) {
+          // Pixels outside the mean do not depend on x: their derivatives are 0.
+          const std::ptrdiff_t a = row_covered ? std::ptrdiff_t(ws.c_lo) * C : len;
+          const std::ptrdiff_t b = row_covered ? std::ptrdiff_t(ws.c_hi) * C : len;
+          for (S* d : {ws.d_mu.data() + o, ws.d_exx.data() + o, ws.d_exy.data() + o}) {
+            std::fill(d, d + a, S(0));
+            std::fill(d + b, d + len, S(0));
+          }
+        }
         for (int c = 0; c < C; ++c)
           ws.row_sums[static_cast<std::size_t>(r) * static_cast<std::size_t>(C) + static_cast<std::size_t>(c)] =
-              detail::strided_sum(smap + c, W, C);
+              row_covered ? detail::strided_sum(smap + std::ptrdiff_t(ws.c_lo) * C + c, ws.c_hi - ws.c_lo, C) : 0.0;
       }
     }
   }
@@ -331,10 +370,11 @@ double ssim_fwd(const Image<S>& x, const Image<S>& y, SsimWorkspace<S>& ws, bool
     double sc = 0;
     for (int r = 0; r < H; ++r)
       sc += ws.row_sums[static_cast<std::size_t>(r) * static_cast<std::size_t>(C) + static_cast<std::size_t>(c)];
-    if (per_channel) (*per_channel)[static_cast<std::size_t>(c)] = sc / static_cast<double>(x.pixels());
+    if (per_channel)
+      (*per_channel)[static_cast<std::size_t>(c)] = sc / static_cast<double>(ws.covered() / static_cast<std::size_t>(C));
     total += sc;
   }
-  return total / static_cast<double>(x.size());
+  return total / static_cast<double>(ws.covered());
 }
 
 /// SSIM backward: `grad_x += scale * d(mean SSIM)/dx` for the images of the last
@@ -355,7 +395,7 @@ void ssim_bwd(const Image<S>& x, const Image<S>& y, SsimWorkspace<S>& ws, S scal
   const std::ptrdiff_t len = static_cast<std::ptrdiff_t>(W) * C;
   const auto win = ssim_window_1d<S>();
   const S* w = win.data();
-  const S k = scale / static_cast<S>(x.size());  // the mean's 1/(H W C)
+  const S k = scale / static_cast<S>(ws.covered());  // the mean's 1/(H W C), or over the valid pixels
   const std::ptrdiff_t ms = ws.map_stride(), mpad = static_cast<std::ptrdiff_t>(ssim_window_radius) * C;
   detail::reserve_thread_scratch(ws.thread_scratch);
 #pragma omp parallel
@@ -399,6 +439,7 @@ void ssim_bwd(const Image<S>& x, const Image<S>& y, SsimWorkspace<S>& ws, S scal
 /// Weights of the photometric loss (1 - lambda) L1 + lambda (1 - SSIM).
 struct PhotometricLossConfig {
   double ssim_weight = 0.2;  ///< lambda; 3DGS and the multi-spectral implementation use 0.2
+  SsimBorder ssim_border = SsimBorder::same;  ///< pixels of the SSIM mean (valid: the multi-spectral implementation)
 };
 
 /// Value of the photometric loss and, when `grad_render` is non-null, its gradient with respect to
@@ -412,7 +453,7 @@ double photometric_loss(const Image<S>& render, const Image<S>& gt, Image<S>* gr
   detail::check_same_shape("photometric_loss", render.width, render.height, render.channels, gt.width, gt.height,
                            gt.channels);
   const bool want_grad = grad_render != nullptr;
-  const double ssim_value = ssim_fwd(render, gt, ws, want_grad);
+  const double ssim_value = ssim_fwd(render, gt, ws, want_grad, nullptr, cfg.ssim_border);
   if (render.data.empty()) {
     if (want_grad) grad_render->reset(render.width, render.height, render.channels);
     return 0.0;
@@ -583,19 +624,19 @@ double psnr(const Image<S>& a, const Image<S>& b, double max_value = 1.0) {
   return 10.0 * std::log10(max_value * max_value / std::max(mse, psnr_min_mse));
 }
 
-/// Mean SSIM (same window and borders as the training loss) over pixels and channels.
+/// Mean SSIM (same window as the training loss) over pixels and channels.
 template <class S>
-double ssim(const Image<S>& a, const Image<S>& b) {
+double ssim(const Image<S>& a, const Image<S>& b, SsimBorder border = SsimBorder::same) {
   SsimWorkspace<S> ws;
-  return ssim_fwd(a, b, ws);
+  return ssim_fwd(a, b, ws, false, nullptr, border);
 }
 
 /// Mean SSIM of each channel.
 template <class S>
-std::vector<double> ssim_per_channel(const Image<S>& a, const Image<S>& b) {
+std::vector<double> ssim_per_channel(const Image<S>& a, const Image<S>& b, SsimBorder border = SsimBorder::same) {
   SsimWorkspace<S> ws;
   std::vector<double> out;
-  ssim_fwd(a, b, ws, false, &out);
+  ssim_fwd(a, b, ws, false, &out, border);
   return out;
 }
 

@@ -62,6 +62,12 @@ struct RunResult {
   bool exposure = false;                         ///< per-image exposure correction learned (TrainOptions::exposure)
   /// With exposure: the learned gains and offsets per model and band (model key, as `gaussians`).
   std::vector<std::pair<std::string, BandExposure>> exposure_params;
+  /// Anytime evaluations of every model in training order (TrainOptions::curve), seconds on the
+  /// run's training clock.
+  std::vector<CurvePoint> curve;
+  /// The run's training clock at the end: seconds of training over every model, anytime
+  /// evaluations and final evaluation excluded.
+  double train_seconds = 0;
 };
 
 namespace detail {
@@ -173,6 +179,7 @@ GaussianModel<G, float> train_model(const io::Dataset& ds, std::vector<TrainBand
                                     const std::string& key, const std::filesystem::path& out_dir,
                                     const std::vector<std::string>& names, RunResult& res, std::int64_t adam_iteration) {
   TrainOptions topt = cfg.train;
+  topt.clock_offset = res.train_seconds;
   std::filesystem::path ckpt;
   if (cfg.checkpoints && !out_dir.empty()) {
     std::filesystem::create_directories(out_dir / "checkpoints");
@@ -188,8 +195,14 @@ GaussianModel<G, float> train_model(const io::Dataset& ds, std::vector<TrainBand
   if (begin >= end && topt.on_step) topt.on_step(StepView::of(tr.model(), tr.bands(), end, begin, end));  // resumed, done
   res.steps += reached - begin;
   if (reached < end) res.interrupted = true;
+  else tr.finish_curve(end);
   for (auto& m : tr.evaluate()) res.metrics.push_back(std::move(m));
   for (auto& e : tr.exposure_report()) res.exposure_params.emplace_back(key, std::move(e));
+  for (CurvePoint p : tr.curve()) {
+    p.model = key;
+    res.curve.push_back(std::move(p));
+  }
+  res.train_seconds += tr.clock();
   res.times += tr.times();
   res.gaussians[key] = tr.model().size();
   if (!out_dir.empty()) {
@@ -262,7 +275,15 @@ RunResult run_experiment(const io::Dataset& ds, const RunConfig& cfg, const std:
           auto train_from_geometry = [&](auto model) {
             using G = typename decltype(model)::gaussian_type;
             detail::copy_geometry(geo_model, model);
-            detail::fresh_colour(model, cfg.init.seed + 1u + std::uint32_t(i));
+            if (cfg.train.spectral_colour_init) {
+              // The fast preset: the band's colour from the geometry model's, at its brightness.
+              ImageCache images(ds);
+              const int factor = spec.plan.schedule.downscale(stage);
+              set_colour_from_luminance(model, 0, b.channels, dc_luminance(geo_model, 0, geo.channels),
+                                        mean_luminance(images, b, factor), mean_luminance(images, geo, factor));
+            } else {
+              detail::fresh_colour(model, cfg.init.seed + 1u + std::uint32_t(i));
+            }
             detail::train_model<G>(ds, {b}, std::move(model), spec, cfg, stage, 2 * stage, b.id, out_dir,
                                    detail::channel_names(b), res, stage);
           };

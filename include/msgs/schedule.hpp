@@ -156,12 +156,12 @@ std::vector<S> random_background(long long step, int channels, std::uint64_t see
   return bg;
 }
 
-/// Evaluation background of the RGB band (splatfacto's grey).
-inline constexpr double eval_background_rgb[3] = {0.149, 0.165, 0.216};
+/// Evaluation background of the RGB band: splatfacto's grey, torch.tensor([0.1490, 0.1647, 0.2157]).
+inline constexpr double eval_background_rgb[3] = {0.1490, 0.1647, 0.2157};
 /// Luminance weights used to turn an RGB background into a single-channel one: ITU-R BT.601
 /// (0.299, 0.587, 0.114), the weights of PIL's convert("L") and torchvision's rgb_to_grayscale.
 inline constexpr double luminance_weights[3] = {0.299, 0.587, 0.114};
-/// The evaluation background of a 1-channel band: BT.601 luminance of the grey, about 0.16603.
+/// The evaluation background of a 1-channel band: BT.601 luminance of the grey, about 0.16581.
 inline constexpr double eval_background_luminance =
     luminance_weights[0] * eval_background_rgb[0] + luminance_weights[1] * eval_background_rgb[1] +
     luminance_weights[2] * eval_background_rgb[2];
@@ -175,11 +175,21 @@ std::vector<S> eval_background(int channels) {
   throw std::invalid_argument("eval_background: a band has 1 or 3 channels, got " + std::to_string(channels));
 }
 
-/// Round-robin band sampling (REFERENCE §3). Each band's image list is shuffled once with a fixed
-/// seed; shorter lists are repeated (cyclically) to the length L of the longest; the B lists are
-/// interleaved so that step t renders band t mod B with image (t div B) mod L of that band's list.
-/// The sequence repeats with period B * L. Everything is a function of t, so resuming at any step
-/// continues the same sequence.
+/// How a band's image list is ordered over a long run.
+enum class Shuffle {
+  once,        ///< shuffled once with the seed, then repeated (msgs before 2026-11)
+  every_pass,  ///< reshuffled every time it is used up, as the reference implementation
+};
+
+/// Round-robin band sampling (REFERENCE §3 and §9). Each band's image list is shuffled with a fixed
+/// seed; the B lists are interleaved so that step t renders band t mod B, with draw k = t div B of
+/// that band.
+/// - Shuffle::once: shorter lists are repeated (cyclically) to the length L of the longest and draw
+///   k takes entry k mod L; the sequence repeats with period B * L.
+/// - Shuffle::every_pass (the reference implementation): band b's list of n_b images is reshuffled
+///   each time it is used up, so draw k takes entry k mod n_b of the pass k div n_b's own order.
+///   The first pass equals Shuffle::once's order.
+/// Everything is a function of t, so resuming at any step continues the same sequence.
 class BandSampler {
  public:
   /// One draw: the band (index into the lists given to the constructor) and the image id (an
@@ -193,7 +203,8 @@ class BandSampler {
   BandSampler() = default;
 
   /// `band_images[b]` lists the image ids of band b (for example indices into the train split).
-  explicit BandSampler(std::vector<std::vector<int>> band_images, std::uint64_t seed = 42) {
+  explicit BandSampler(std::vector<std::vector<int>> band_images, std::uint64_t seed = 42, Shuffle mode = Shuffle::once)
+      : seed_(seed), mode_(mode) {
     if (band_images.empty()) throw std::invalid_argument("BandSampler: need at least one band");
     std::size_t longest = 0;
     for (std::size_t b = 0; b < band_images.size(); ++b) {
@@ -202,14 +213,10 @@ class BandSampler {
       longest = std::max(longest, band_images[b].size());
     }
     order_.resize(band_images.size());
+    lists_.resize(band_images.size());
     for (std::size_t b = 0; b < band_images.size(); ++b) {
-      std::vector<int> list = std::move(band_images[b]);
-      // Fisher-Yates driven by hashes of (seed, band, position): portable across toolchains.
-      for (std::size_t i = list.size(); i > 1; --i) {
-        const std::uint64_t h = detail::sched_hash(seed, 0x5A3ULL, b, i);
-        const std::size_t j = static_cast<std::size_t>(h % i);
-        std::swap(list[i - 1], list[j]);
-      }
+      lists_[b] = std::move(band_images[b]);
+      const std::vector<int> list = shuffled(b, 0);
       auto& out = order_[b];
       out.resize(longest);
       for (std::size_t k = 0; k < longest; ++k) out[k] = list[k % list.size()];
@@ -217,22 +224,23 @@ class BandSampler {
   }
 
   /// Sampler over images 0 .. counts[b]-1 of each band.
-  static BandSampler from_counts(const std::vector<int>& counts, std::uint64_t seed = 42) {
+  static BandSampler from_counts(const std::vector<int>& counts, std::uint64_t seed = 42, Shuffle mode = Shuffle::once) {
     std::vector<std::vector<int>> lists(counts.size());
     for (std::size_t b = 0; b < counts.size(); ++b) {
       if (counts[b] < 0) throw std::invalid_argument("BandSampler: negative image count for band " + std::to_string(b));
       lists[b].resize(static_cast<std::size_t>(counts[b]));
       for (int i = 0; i < counts[b]; ++i) lists[b][static_cast<std::size_t>(i)] = i;
     }
-    return BandSampler(std::move(lists), seed);
+    return BandSampler(std::move(lists), seed, mode);
   }
 
   /// Number of bands.
   int num_bands() const { return static_cast<int>(order_.size()); }
   /// Length of every band's (repeated) list.
   std::size_t list_length() const { return order_.empty() ? 0 : order_[0].size(); }
-  /// Steps after which the sequence repeats: bands x list length.
+  /// Steps after which the sequence repeats (Shuffle::once): bands x list length.
   long long period() const { return static_cast<long long>(order_.size() * list_length()); }
+  Shuffle mode() const { return mode_; }
 
   /// The (band, image) that step `step` renders.
   Draw at(long long step) const {
@@ -240,12 +248,35 @@ class BandSampler {
     if (step < 0) throw std::invalid_argument("BandSampler::at: step must be >= 0, got " + std::to_string(step));
     const auto nb = static_cast<long long>(order_.size());
     const auto b = static_cast<std::size_t>(step % nb);
-    const auto k = static_cast<std::size_t>((step / nb) % static_cast<long long>(list_length()));
+    const long long draw = step / nb;
+    if (mode_ == Shuffle::every_pass) {
+      const auto n = static_cast<long long>(lists_[b].size());
+      const long long pass = draw / n;
+      const auto k = static_cast<std::size_t>(draw % n);
+      if (pass == 0) return {static_cast<int>(b), order_[b][k]};
+      return {static_cast<int>(b), shuffled(b, static_cast<std::uint64_t>(pass))[k]};
+    }
+    const auto k = static_cast<std::size_t>(draw % static_cast<long long>(list_length()));
     return {static_cast<int>(b), order_[b][k]};
   }
 
  private:
-  std::vector<std::vector<int>> order_;  // [B][L] shuffled and repeated image ids
+  /// Band b's list in the order of pass `pass`: Fisher-Yates driven by hashes of (seed, band,
+  /// [pass,] position), portable across toolchains. Pass 0 keeps the hash of the shuffle-once order.
+  std::vector<int> shuffled(std::size_t b, std::uint64_t pass) const {
+    std::vector<int> list = lists_[b];
+    for (std::size_t i = list.size(); i > 1; --i) {
+      const std::uint64_t h = pass == 0 ? detail::sched_hash(seed_, 0x5A3ULL, b, i) : detail::sched_hash(seed_, 0x5A4ULL, b, pass, i);
+      const std::size_t j = static_cast<std::size_t>(h % i);
+      std::swap(list[i - 1], list[j]);
+    }
+    return list;
+  }
+
+  std::uint64_t seed_ = 42;
+  Shuffle mode_ = Shuffle::once;
+  std::vector<std::vector<int>> lists_;  // [B][n_b] image ids as given
+  std::vector<std::vector<int>> order_;  // [B][L] pass-0 order, repeated to the longest list
 };
 
 }  // namespace msgs

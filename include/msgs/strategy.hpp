@@ -105,15 +105,17 @@ inline void floor_refine_schedule(DensifyConfig& d) {
   if (d.refine_start < kMinRefineStart) d.refine_start = kMinRefineStart;
 }
 
-/// SpecDelay: RGB only for the first 30k steps; densification paused in (29k, 32k]; spectral
-/// colours then warm up for 2k steps with geometry frozen (paper Sec. 3.2.4 and 4.3).
+/// SpecDelay: RGB only for the first 30k steps; densification (statistics, refinement and opacity
+/// resets) paused for steps 29001..32001; spectral colours then warm up for 2k steps with geometry
+/// frozen (paper Sec. 3.2.4 and 4.3). The window is the reference command's `29000 32001` (start
+/// exclusive, end inclusive), so its end is the scaled 32000 plus one step.
 struct SpecDelay : Modifier {
   static constexpr std::string_view name = "specdelay";
   static void configure(TrainPlan& p) {
     p.spectral_start = p.scale(30000);
     p.spectral_geometry_start = p.scale(32000);
     p.densify.pause_begin = p.scale(29000);
-    p.densify.pause_end = p.scale(32000);
+    p.densify.pause_end = p.scale(32000) + 1;
   }
   static bool band_enabled(const TrainPlan& p, long long step, bool spectral) {
     return !spectral || step >= p.spectral_start;

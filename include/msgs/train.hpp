@@ -20,6 +20,7 @@
 
 #include "adam.hpp"
 #include "checkpoint.hpp"
+#include "curve.hpp"
 #include "densify.hpp"
 #include "exposure.hpp"
 #include "gaussian.hpp"
@@ -27,6 +28,7 @@
 #include "loss.hpp"
 #include "rasterize.hpp"
 #include "schedule.hpp"
+#include "sh.hpp"
 #include "strategy.hpp"
 
 namespace msgs {
@@ -90,11 +92,30 @@ struct StepView {
   }
 };
 
-/// Options of a training run that are not part of the strategy's plan.
+/// Options of a training run that are not part of the strategy's plan. The defaults follow the
+/// multi-spectral reference implementation (REFERENCE §9); presets.hpp names the departures.
 struct TrainOptions {
   std::uint64_t seed = 0;            ///< band sampling, backgrounds, split samples
   AdamConfig adam{};                 ///< learning rates (lr_means_steps is set from the plan)
-  PhotometricLossConfig loss{};
+  /// L1 + SSIM; SSIM over the valid 11x11 windows as the reference's pytorch-msssim (same: 3DGS).
+  PhotometricLossConfig loss{.ssim_weight = 0.2, .ssim_border = SsimBorder::valid};
+  /// Clamp each training render to [0, 1] (after the background) before the loss, as the
+  /// reference does: saturated pixels get no gradient. false: the loss sees the raw render (3DGS).
+  bool clamp_render = true;
+  /// Each band's image list is reshuffled whenever it is used up (the reference), or shuffled once.
+  Shuffle shuffle = Shuffle::every_pass;
+  /// SSIM of the evaluation (valid: pytorch-msssim, as the reference; same: zero-padded, 3DGS).
+  SsimBorder eval_ssim = SsimBorder::valid;
+  /// Anytime evaluation: quality against training time (curve.hpp); off by default.
+  CurveConfig curve{};
+  /// Seconds the run trained before this model (Separate and Split train models one after another),
+  /// added to the curve's training clock.
+  double clock_offset = 0;
+  /// When narrow bands join a Joint run that trained its geometry band alone first (SpecDelay), or a
+  /// Split band model takes the geometry band's Gaussians: start each narrow band's colour from the
+  /// geometry band's luminance, scaled to the band's mean image brightness, instead of uniform random
+  /// values (the `fast` preset; the reference starts from random colours).
+  bool spectral_colour_init = false;
   ScaleRegConfig scale_reg{};
   int scale_reg_every = 10;          ///< the regulariser is added every this many steps (0 = never)
   bool random_background = true;     ///< random background per step (else black)
@@ -172,6 +193,70 @@ inline void clamp01(Image<float>& img) {
   for (float& v : img.data) v = std::clamp(v, 0.0f, 1.0f);
 }
 
+/// `out` = `img` clamped to [0, 1] (training renders, TrainOptions::clamp_render).
+inline void clamp01(const Image<float>& img, Image<float>& out) {
+  if (out.width != img.width || out.height != img.height || out.channels != img.channels || out.size() != img.size())
+    out.reset(img.width, img.height, img.channels);
+  for (std::size_t i = 0; i < img.data.size(); ++i) out.data[i] = std::clamp(img.data[i], 0.0f, 1.0f);
+}
+
+/// The clamp's backward: the gradient is 0 where the render was outside [0, 1] (torch.clamp's).
+inline void clamp01_backward(const Image<float>& img, Image<float>& grad) {
+  for (std::size_t i = 0; i < img.data.size(); ++i)
+    if (!(img.data[i] >= 0.0f && img.data[i] <= 1.0f)) grad.data[i] = 0.0f;
+}
+
+/// Mean over a band's training images (at downscale `factor`) of their luminance: BT.601 for RGB,
+/// the value for one channel.
+inline double mean_luminance(ImageCache& images, const TrainBand& b, int factor) {
+  double sum = 0;
+  std::size_t n = 0;
+  for (std::size_t f : b.train_frames) {
+    const Image<float>& img = images.get(f, factor);
+    for (std::size_t p = 0; p < img.pixels(); ++p) {
+      const float* v = img.data.data() + p * std::size_t(img.channels);
+      sum += img.channels == 3 ? luminance_weights[0] * v[0] + luminance_weights[1] * v[1] + luminance_weights[2] * v[2]
+                               : double(v[0]);
+      ++n;
+    }
+  }
+  return n ? sum / double(n) : 0.0;
+}
+
+/// Per Gaussian, the luminance of the view-independent colour (C0 dc + 0.5, clamped at 0) of
+/// channels [first, first + channels): BT.601 for three channels, the value for one.
+template <class G>
+std::vector<float> dc_luminance(const GaussianModel<G, float>& m, int first, int channels) {
+  std::vector<float> lum(m.size());
+  for (std::size_t i = 0; i < m.size(); ++i) {
+    double l = 0;
+    for (int c = 0; c < channels; ++c) {
+      const double colour = std::max(0.0, sh::C0 * double(m.sh_at(i, 0, first + c)) + 0.5);
+      l += channels == 3 ? luminance_weights[std::size_t(c)] * colour : colour;
+    }
+    lum[i] = float(l);
+  }
+  return lum;
+}
+
+/// Colour of channels [first, first + channels) from another band's luminance `lum` (dc_luminance),
+/// scaled by band_mean / geometry_mean (the bands' mean image luminance, mean_luminance) so the band
+/// starts at its own brightness with the geometry band's texture; higher SH orders 0. A dark
+/// geometry band (mean below 1e-6) keeps the scale 1. The `fast` preset's narrow-band start.
+template <class G>
+void set_colour_from_luminance(GaussianModel<G, float>& m, int first, int channels, const std::vector<float>& lum,
+                               double band_mean, double geometry_mean) {
+  if (lum.size() != m.size())
+    throw std::invalid_argument("set_colour_from_luminance: " + std::to_string(lum.size()) + " luminances for " +
+                                std::to_string(m.size()) + " Gaussians");
+  const double k = geometry_mean > 1e-6 && std::isfinite(band_mean) ? band_mean / geometry_mean : 1.0;
+  for (int c = 0; c < channels; ++c)
+    for (std::size_t i = 0; i < m.size(); ++i) {
+      m.sh_at(i, 0, first + c) = float((k * double(lum[i]) - 0.5) / sh::C0);
+      for (int j = 1; j < G::sh_coeffs; ++j) m.sh_at(i, j, first + c) = 0.0f;
+    }
+}
+
 /// Trains one model of Gaussian type G on a set of bands.
 template <class G>
 class Trainer {
@@ -181,7 +266,7 @@ class Trainer {
   Trainer(const io::Dataset& ds, std::vector<TrainBand> bands, Model model, TrainPlan plan, StrategyHooks hooks,
           TrainOptions opt)
       : ds_(&ds), bands_(std::move(bands)), model_(std::move(model)), plan_(std::move(plan)), hooks_(hooks),
-        opt_(std::move(opt)), images_(ds),
+        opt_(std::move(opt)), images_(ds), curve_images_(ds),
         density_(plan_.densify, int(bands_.size()), count_train_images(), opt_.scene_scale) {
     if (bands_.empty()) throw std::invalid_argument("Trainer: no bands to train");
     for (const auto& b : bands_) {
@@ -224,8 +309,14 @@ class Trainer {
     return st;
   }
 
-  /// Continue from a saved state; returns the step to resume at.
+  /// Continue from a saved state; returns the step to resume at. The anytime-evaluation curve and
+  /// the training clock continue from the file next to the checkpoint when there is one.
   long long restore(TrainState<G> st) {
+    if (!opt_.checkpoint_path.empty() && std::filesystem::exists(curve_path())) {
+      auto [clock, points] = load_curve(curve_path());
+      clock_ = clock;
+      curve_ = std::move(points);
+    }
     if (opt_.exposure != !st.exposure.empty())
       throw std::runtime_error(opt_.exposure ? "cannot resume with exposure compensation on: the checkpoint was written without it"
                                              : "cannot resume without exposure compensation: the checkpoint was written with it on");
@@ -242,6 +333,10 @@ class Trainer {
 
   Model& model() { return model_; }
   const Model& model() const { return model_; }
+  /// Anytime evaluations so far (TrainOptions::curve), seconds including clock_offset.
+  const std::vector<CurvePoint>& curve() const { return curve_; }
+  /// Seconds this trainer has trained (steps, callbacks, checkpoints; anytime evaluations excluded).
+  double clock() const { return clock_; }
   Adam<G, float>& adam() { return adam_; }
   DensityControl& density() { return density_; }
   const StageTimes& times() const { return times_; }
@@ -280,15 +375,30 @@ class Trainer {
     Gradients<G, float> grads;
     Image<float> d_image;
     Image<float> corrected;  // exposure: g * render + b, what the loss sees
+    Image<float> clamped;    // clamp_render: the render in [0, 1]
     SsimWorkspace<float> ws;
     double loss_sum = 0;
     long long loss_n = 0;
     DensifyReport last_rep;
     long long step = begin;
+    auto mark = clock::now();  // the training clock runs from here, paused for anytime evaluations
+    auto tick = [&] {
+      const auto now = clock::now();
+      clock_ += seconds(mark, now);
+      mark = now;
+    };
     for (; step < end; ++step) {
       if (opt_.stop && opt_.stop->load()) break;
+      if (opt_.curve.enabled()) {
+        tick();
+        if (curve_due(step)) {
+          record_curve(step);
+          mark = clock::now();
+        }
+      }
       if (!opt_.checkpoint_path.empty() && opt_.checkpoint_every > 0 && step > begin && step % opt_.checkpoint_every == 0)
-        save_checkpoint(opt_.checkpoint_path, state(step));
+        checkpoint(step, tick);
+      if (opt_.spectral_colour_init && step == plan_.spectral_start && plan_.spectral_start > 0) init_spectral_colours(step);
       auto t0 = clock::now();
       // 1. Which band and image.
       const auto [bi, frame] = sample(step);
@@ -307,10 +417,12 @@ class Trainer {
       rs.background = opt_.random_background ? random_background<float>(step, band.channels, opt_.seed)
                                              : std::vector<float>(std::size_t(band.channels), 0.0f);
       raster.timings().reset();
-      const Image<float>& render = raster.forward(model_, cam, rs);
+      const Image<float>& raw = raster.forward(model_, cam, rs);
       auto t2 = clock::now();
 
-      // 3. Loss and its gradient (of the exposure-corrected render when exposure is on).
+      // 3. Loss and its gradient (of the clamped render, then exposure-corrected when exposure is on).
+      if (opt_.clamp_render) clamp01(raw, clamped);
+      const Image<float>& render = opt_.clamp_render ? clamped : raw;
       if (opt_.exposure) exposure_.forward(frame, render, corrected);
       const Image<float>& seen_image = opt_.exposure ? corrected : render;
       const double loss = photometric_loss(seen_image, gt, &d_image, ws, opt_.loss);
@@ -324,6 +436,7 @@ class Trainer {
       // 4. Backward: through the exposure correction (its Adam step on this image's parameters
       // only, taken here since nothing else reads them), then the rasteriser.
       if (opt_.exposure) exposure_.backward_and_step(frame, render, d_image);
+      if (opt_.clamp_render) clamp01_backward(raw, d_image);
       const std::vector<std::uint32_t>& seen = raster.visible();
       const std::vector<std::uint32_t>* rows = opt_.sparse ? &seen : nullptr;
       raster.backward(d_image, nullptr, nullptr, grads, opt_.sparse ? GradientFill::visible : GradientFill::dense);
@@ -358,7 +471,11 @@ class Trainer {
       times_.densify += seconds(t5, t6);
 
       if (opt_.check_finite) check_finite(step);
-      if (opt_.on_step) opt_.on_step(StepView::of(model_, bands_, step + 1, begin, end));
+      if (opt_.on_step) {  // off the training clock, like anytime evaluations
+        tick();
+        opt_.on_step(StepView::of(model_, bands_, step + 1, begin, end));
+        mark = clock::now();
+      }
       if (opt_.on_progress && ((step + 1 - begin) % std::max(1, opt_.progress_every) == 0 || step + 1 == end)) {
         TrainProgress pr;
         pr.step = step + 1; pr.begin = begin; pr.end = end;
@@ -371,8 +488,15 @@ class Trainer {
         opt_.on_progress(pr);
       }
     }
-    if (!opt_.checkpoint_path.empty()) save_checkpoint(opt_.checkpoint_path, state(step));
+    tick();
+    if (!opt_.checkpoint_path.empty()) checkpoint(step, tick);
     return step;
+  }
+
+  /// With the anytime evaluation on: a point at `step` now (the model's last step, say), unless the
+  /// curve already ends there. Its time is off the training clock.
+  void finish_curve(long long step) {
+    if (opt_.curve.enabled() && (curve_.empty() || curve_.back().step != step)) record_curve(step);
   }
 
   /// PSNR and SSIM of every eval image of every band at full resolution, with the evaluation
@@ -397,11 +521,11 @@ class Trainer {
         clamp01(render);
         const Image<float>& gt = full.get(f, 1);
         m.psnr.push_back(psnr(render, gt));
-        m.ssim.push_back(ssim(render, gt));
+        m.ssim.push_back(ssim(render, gt, opt_.eval_ssim));
         if (opt_.exposure) {
           const Image<float> cc = colour_correct(render, gt);
           m.psnr_cc.push_back(psnr(cc, gt));
-          m.ssim_cc.push_back(ssim(cc, gt));
+          m.ssim_cc.push_back(ssim(cc, gt, opt_.eval_ssim));
         }
       }
       out.push_back(std::move(m));
@@ -413,6 +537,75 @@ class Trainer {
  private:
   static double seconds(std::chrono::steady_clock::time_point a, std::chrono::steady_clock::time_point b) {
     return std::chrono::duration<double>(b - a).count();
+  }
+
+  std::filesystem::path curve_path() const {
+    std::filesystem::path p = opt_.checkpoint_path;
+    p += ".curve";
+    return p;
+  }
+
+  /// Checkpoint (and the curve with its clock, when recorded) at `next_step`; `tick` brings the clock up to now.
+  template <class Tick>
+  void checkpoint(long long next_step, Tick&& tick) {
+    save_checkpoint(opt_.checkpoint_path, state(next_step));
+    if (opt_.curve.enabled()) {
+      tick();
+      save_curve(curve_path(), clock_, curve_);
+    }
+  }
+
+  /// Whether an anytime evaluation is due before `step`: the first step, or a period has passed.
+  bool curve_due(long long step) const {
+    if (curve_.empty()) return true;
+    const CurvePoint& last = curve_.back();
+    if (opt_.curve.every_steps > 0 && step - last.step >= opt_.curve.every_steps) return true;
+    return opt_.curve.every_seconds > 0 && opt_.clock_offset + clock_ - last.seconds >= opt_.curve.every_seconds;
+  }
+
+  /// Evaluate the fixed subset of every band's eval images (curve_subset) at full resolution, as
+  /// evaluate() does, and append the point. The caller keeps its time off the training clock.
+  void record_curve(long long step) {
+    const auto t0 = std::chrono::steady_clock::now();
+    CurvePoint p;
+    p.seconds = opt_.clock_offset + clock_;
+    p.step = step;
+    p.gaussians = model_.size();
+    Rasterizer<G, float, kTrainRaster> raster;
+    for (const auto& band : bands_) {
+      p.bands.push_back(band.id);
+      double sp = 0, ss = 0;
+      const std::vector<std::size_t> pick = curve_subset(band.eval_frames.size(), opt_.curve.images);
+      for (std::size_t k : pick) {
+        const std::size_t f = band.eval_frames[k];
+        RenderSettings<float> rs;
+        rs.band_first = band.first_channel;
+        rs.band_count = band.channels;
+        rs.background = eval_background<float>(band.channels);
+        Image<float> render = raster.forward(model_, curve_images_.camera(f, 1), rs);
+        clamp01(render);
+        const Image<float>& gt = curve_images_.get(f, 1);
+        sp += psnr(render, gt);
+        ss += ssim(render, gt, opt_.eval_ssim);
+      }
+      const double n = double(pick.size());
+      p.psnr.push_back(pick.empty() ? std::nan("") : sp / n);
+      p.ssim.push_back(pick.empty() ? std::nan("") : ss / n);
+    }
+    curve_.push_back(std::move(p));
+    times_.eval += seconds(t0, std::chrono::steady_clock::now());
+  }
+
+  /// TrainOptions::spectral_colour_init at `step`: every narrow band's colour starts from the
+  /// geometry band's (spectral_colour_from).
+  void init_spectral_colours(long long step) {
+    const auto geo = std::find_if(bands_.begin(), bands_.end(), [](const TrainBand& b) { return !b.spectral; });
+    if (geo == bands_.end()) return;
+    const int factor = plan_.schedule.downscale(step);
+    const double geo_mean = mean_luminance(images_, *geo, factor);
+    const std::vector<float> lum = dc_luminance(model_, geo->first_channel, geo->channels);
+    for (const TrainBand& b : bands_)
+      if (b.spectral) set_colour_from_luminance(model_, b.first_channel, b.channels, lum, mean_luminance(images_, b, factor), geo_mean);
   }
 
   int count_train_images() const {
@@ -439,7 +632,7 @@ class Trainer {
           lists.push_back(std::move(l));
           ids.push_back(int(b));
         }
-      it = samplers_.emplace(mask, std::make_pair(BandSampler(std::move(lists), opt_.seed ^ 0x5eedULL), ids)).first;
+      it = samplers_.emplace(mask, std::make_pair(BandSampler(std::move(lists), opt_.seed ^ 0x5eedULL, opt_.shuffle), ids)).first;
     }
     const BandSampler::Draw d = it->second.first.at(step);
     const int b = it->second.second[std::size_t(d.band)];
@@ -491,10 +684,13 @@ class Trainer {
   StrategyHooks hooks_;
   TrainOptions opt_;
   ImageCache images_;
+  ImageCache curve_images_;  // full-resolution eval images of the anytime evaluation
   Adam<G, float> adam_;
   Exposure exposure_;  // empty unless opt_.exposure
   DensityControl density_;
   StageTimes times_;
+  double clock_ = 0;                 // training seconds, anytime evaluations excluded
+  std::vector<CurvePoint> curve_;
   std::vector<double> band_psnr_;
   std::map<std::uint32_t, std::pair<BandSampler, std::vector<int>>> samplers_;
 };
