@@ -7,7 +7,12 @@
 // The 1M-Gaussian cases are opt-in (about 1 GB and seconds to build the scene):
 //   MSGS_BENCH_LARGE=1 ./bench_view
 // `--benchmark_filter=100k` etc. select sizes; `/encode:0` cases time the render alone.
+//
+// view_snapshot: what `msgs train --view` costs the training thread per snapshot (a copy of the
+// model published into a SnapshotStore, msgs/snapshot.hpp); taken at most once a second.
 #include <benchmark/benchmark.h>
+
+#include <msgs/snapshot.hpp>
 
 #include "../examples/view_api.hpp"
 #include "scene_family.hpp"
@@ -15,6 +20,7 @@
 #include <cstdlib>
 #include <memory>
 #include <string>
+#include <variant>
 #include <vector>
 
 using namespace msgs;
@@ -71,6 +77,23 @@ void BM_view_frame(benchmark::State& st, int size, const char* mode_id, bool enc
   if (encode) st.counters["jpeg_kB"] = double(bytes) / 1024.0;
 }
 
+void BM_view_snapshot(benchmark::State& st, int size) {
+  const ModelSet& models = models_for(size);
+  const auto& model = std::get<GaussianModel<G, float>>(models.models()[0]->model);
+  const std::vector<TrainBand> bands;
+  SnapshotStore store(SnapshotPolicy{.min_seconds = 1e9, .every = 1});  // a snapshot at every call
+  long long step = 0;
+  for (auto _ : st) {
+    StepView v = StepView::of(model, bands, ++step, 0, 1LL << 40);
+    v.key = "joint";
+    store.on_step(v);
+  }
+  st.counters["Gaussians/s"] =
+      benchmark::Counter(double(model.size()), benchmark::Counter::kIsIterationInvariantRate);
+  st.counters["MB"] = double(model.means.size() + model.log_scales.size() + model.quats.size() +
+                             model.opacity_logits.size() + model.sh.size()) * 4.0 / 1e6;
+}
+
 const int registered = [] {
   const bool large = std::getenv("MSGS_BENCH_LARGE") != nullptr;
   for (int size = 0; size < 2; ++size) {
@@ -84,6 +107,10 @@ const int registered = [] {
             ->MinTime(2.0)
             ->UseRealTime();
       }
+    benchmark::RegisterBenchmark((std::string("view_snapshot/") + kSizes[size].name).c_str(), BM_view_snapshot, size)
+        ->Unit(benchmark::kMillisecond)
+        ->MinTime(1.0)
+        ->UseRealTime();
   }
   return 0;
 }();

@@ -15,6 +15,7 @@
 #include "commands.hpp"
 #include "data_options.hpp"
 #include "experiment.hpp"
+#include "live_view.hpp"
 #include "render_dispatch.hpp"
 #include "report.hpp"
 #include "run_sheets.hpp"
@@ -29,6 +30,7 @@ constexpr const char* kUsage =
     "                  [--exposure [--lr-exposure X]] [--preset reference|fast] [--ssim valid|same]\n"
     "                  [--no-clamp] [--shuffle every-pass|once] [--adam sparse|dense] [--lr-sh-dc X]\n"
     "                  [--eval-every-seconds T] [--eval-every-steps N] [--eval-images K]\n"
+    "                  [--view [PORT] [--host H]]\n"
     "\n"
     "Train Gaussian splats on a multi-spectral dataset (nerfstudio-style layout, or a COLMAP scene) with one of the\n"
     "paper's strategies, evaluate every band on the eval split and write to DIR:\n"
@@ -75,8 +77,17 @@ constexpr const char* kUsage =
     "  --sheets N        contact sheets of the first N eval captures in the dataset's frame order\n"
     "                    (default 3; 0 = none); written after result.json, which they do not change\n"
     "  --resume          continue from DIR/checkpoints/*.ckpt; the result equals an uninterrupted run\n"
+    "  --view [PORT]     serve the `msgs view` page on the models while they train, at\n"
+    "                    http://127.0.0.1:PORT/ (default 8080; 0 = any free port, printed): a snapshot\n"
+    "                    of the model at most every second, the dataset's cameras and ground truth;\n"
+    "                    with separate/split, the band models trained so far. Results are the same\n"
+    "                    with and without it. When the run finishes the viewer keeps serving until\n"
+    "                    Ctrl-C; a busy port is an error before training starts. The msgs view\n"
+    "                    API, plus /api/live: state, step and models so far as JSON\n"
+    "  --host H          address --view listens on (default 127.0.0.1; see msgs view --help)\n"
     "Ctrl-C stops after the current step, writes a checkpoint, the models and the metrics (no sheets);\n"
-    "run the same command with --resume to continue.\n";
+    "run the same command with --resume to continue (with --view, Ctrl-C during training also stops the\n"
+    "viewer).\n";
 
 std::atomic<bool> g_stop{false};
 void on_sigint(int) { g_stop.store(true); }
@@ -86,11 +97,11 @@ using msgs::cli::split_list;
 int run_train(const std::vector<std::string>& argv) {
   std::vector<std::string> values = {"data", "images", "eval-every", "out", "strategy", "scale", "sh-degree", "bands", "seed",
                                      "checkpoint-every", "orient", "densify", "sheets", "max-gaussians", "geometry-band",
-                                     "lr-exposure"};
+                                     "lr-exposure", "view", "host"};
   std::vector<std::string> flags = {"help", "no-orient", "quiet", "resume", "exposure"};
   for (const auto& k : msgs::cli::train_option_values()) values.push_back(k);
   for (const auto& k : msgs::cli::train_option_flags()) flags.push_back(k);
-  const msgs::cli::Args args(argv, values, flags);
+  const msgs::cli::Args args(msgs::cli::view_option_argv(argv), values, flags);
   if (args.flag("help")) { std::fputs(kUsage, stdout); return 0; }
   if (!args.positional().empty()) throw msgs::cli::UsageError("unexpected argument '" + args.positional()[0] + "'");
   const std::filesystem::path data = args.require("data"), out = args.require("out");
@@ -137,6 +148,8 @@ int run_train(const std::vector<std::string>& argv) {
 
   msgs::validate_run(ds, cfg);  // before anything is written: missing bands, no geometry band
   std::vector<std::string> band_ids = cfg.bands.empty() ? ds.bands() : cfg.bands;
+  msgs::SnapshotStore snapshots;  // --view: the models as they train
+  const std::unique_ptr<msgs::cli::LiveView> live = msgs::cli::start_live_view(args, ds, snapshots, cfg, band_ids.size());
   const bool quiet = args.flag("quiet");
   cfg.train.on_progress = [&](const msgs::TrainProgress& p) {
     if (!quiet) msgs::cli::print_progress(p, band_ids, "");
@@ -197,6 +210,7 @@ int run_train(const std::vector<std::string>& argv) {
   } catch (const std::exception& e) {
     std::fprintf(stderr, "msgs train: warning: contact sheets not written: %s\n", e.what());
   }
+  if (live) msgs::cli::serve_after_run(*live, snapshots, res.interrupted, g_stop, on_sigint);
   return res.interrupted ? 130 : 0;
 }
 

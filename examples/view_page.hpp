@@ -7,6 +7,12 @@
 // Intrinsics are kept relative to the image size (fx / W, fy / H, cx / W, cy / H) so that the
 // same view renders at any resolution: a third of the width while the camera moves, full size
 // once it has been still for 250 ms.
+//
+// Deep links: ?frame=ID&mode=M&size=W&bg=black&format=png opens at dataset camera ID in mode M
+// with the view W pixels wide (any width 64..4096), a background and PNG frames; the address bar
+// follows the camera and mode picked. Live views (`msgs train --view`, /api/info has "live") poll
+// /api/live every second, show the step and state, and re-render the view and the comparison
+// when a new snapshot of the model arrives.
 #pragma once
 
 namespace msgs::view {
@@ -22,6 +28,8 @@ inline constexpr const char* page_html = R"MSGSPAGE(<!doctype html>
   header { padding: 6px 12px; background: #2a2d34; display: flex; gap: 18px; align-items: baseline; flex-wrap: wrap; }
   header b { font-size: 15px; color: #fff; }
   .stat { color: #9cf; font-variant-numeric: tabular-nums; }
+  #live { color: #fc6; font-variant-numeric: tabular-nums; }
+  #live.done { color: #8d8; }
   main { display: flex; gap: 12px; padding: 10px; align-items: flex-start; }
   #left { flex: 1 1 auto; min-width: 0; }
   #side { flex: 0 0 330px; display: flex; flex-direction: column; gap: 10px; }
@@ -60,6 +68,7 @@ inline constexpr const char* page_html = R"MSGSPAGE(<!doctype html>
   <span>round trip <span class="stat" id="sRt">-</span> ms</span>
   <span><span class="stat" id="sFps">-</span> frames/s</span>
   <span>image <span class="stat" id="sRes">-</span></span>
+  <span id="live" hidden></span>
 </header>
 <main>
   <div id="left">
@@ -107,6 +116,9 @@ inline constexpr const char* page_html = R"MSGSPAGE(<!doctype html>
 const $ = id => document.getElementById(id);
 let info = null;
 const IDLE_MS = 250;
+const link = new URLSearchParams(location.search);            // deep link (see the file comment)
+const imgFormat = link.get("format") === "png" ? "png" : "jpeg";  // frames as JPEG unless asked
+const sleep = ms => new Promise(res => setTimeout(res, ms));
 
 // ---- small vector helpers ----
 const add = (a, b) => [a[0] + b[0], a[1] + b[1], a[2] + b[2]];
@@ -199,6 +211,13 @@ function jump(id, compare = true) {
     `fx ${c.fx.toFixed(2)} fy ${c.fy.toFixed(2)} cx ${c.cx.toFixed(2)} cy ${c.cy.toFixed(2)}`;
   moved(true);
   if (compare && c.rendered) showCompare(id); else hideCompare();
+  updateLink();
+}
+function updateLink() {  // keep the address bar a deep link to what is shown
+  const q = new URLSearchParams(location.search);
+  if (atCamera >= 0) q.set("frame", atCamera); else q.delete("frame");
+  q.set("mode", currentMode());
+  history.replaceState(null, "", "?" + q.toString());
 }
 
 // ---- rendering loop: one request in flight, newest state wins ----
@@ -206,7 +225,10 @@ let version = 0, lastMove = 0, inflight = false, shown = { version: -1, full: fa
 const times = [];
 function moved(settled = false) {
   version++;
-  if (!settled) { lastMove = performance.now(); atCamera = -1; }
+  if (!settled) {
+    lastMove = performance.now();
+    if (atCamera >= 0) { atCamera = -1; updateLink(); }
+  }
   pump();
 }
 function renderSize(full) {
@@ -222,7 +244,7 @@ function renderUrl(full) {
   const t = [-dot(cam.right, cam.pos), -dot(cam.down, cam.pos), -dot(cam.fwd, cam.pos)];
   const q = new URLSearchParams({ width: w, height: h, fx: fmt(cam.fxn * w), fy: fmt(cam.fyn * h),
     cx: fmt(cam.cxn * w), cy: fmt(cam.cyn * h), R: R.map(fmt).join(","), t: t.map(fmt).join(","),
-    mode: currentMode(), bg: $("bg").value, gain: gainValue().toString(), format: "jpeg", quality: full ? "92" : "80" });
+    mode: currentMode(), bg: $("bg").value, gain: gainValue().toString(), format: imgFormat, quality: full ? "92" : "80" });
   return "/api/render?" + q.toString();
 }
 async function pump() {
@@ -253,6 +275,8 @@ async function pump() {
     $("sRes").textContent = `${r.headers.get("X-Width")}x${r.headers.get("X-Height")}${full ? "" : " (moving)"}`;
     $("sGauss").textContent = Number(r.headers.get("X-Gaussians")).toLocaleString();
     $("badge").textContent = modeLabel(currentMode()) + (atCamera >= 0 ? ` · camera #${atCamera}` : "");
+    $("badge").hidden = parseInt($("size").value, 10) < 240;  // it would cover a small view; the title has it
+    img.title = $("badge").textContent;
     $("errmsg").textContent = "";
     shown = { version: v, full };
   } catch (e) {
@@ -276,7 +300,7 @@ async function showCompare(id) {
   $("cmpNote").textContent = "";
   for (const u of cmpUrls) URL.revokeObjectURL(u);
   cmpUrls = [];
-  const base = { id, mode: currentMode(), bg: $("bg").value, gain: gainValue().toString(), scale, format: "jpeg", quality: "92" };
+  const base = { id, mode: currentMode(), bg: $("bg").value, gain: gainValue().toString(), scale, format: imgFormat, quality: "92" };
   const get = async (what, el) => {
     const r = await fetch("/api/frame?" + new URLSearchParams({ ...base, what }).toString());
     if (!r.ok) { el.removeAttribute("src"); el.alt = (await r.json().catch(() => ({}))).error || r.statusText; return r; }
@@ -344,7 +368,7 @@ function updateLegend() {
 function gainValue() { return Math.pow(2, parseFloat($("gain").value)); }
 
 // ---- camera list ----
-function fillCameras() {
+function fillCameras(scroll = true) {
   const rows = $("camRows");
   rows.innerHTML = "";
   const band = $("fBand").value, split = $("fSplit").value;
@@ -359,13 +383,13 @@ function fillCameras() {
     tr.onclick = () => jump(i);
     rows.appendChild(tr);
   });
-  highlightCamera();
+  highlightCamera(scroll);
 }
-function highlightCamera() {
+function highlightCamera(scroll = true) {
   for (const tr of $("camRows").children) {
     const on = Number(tr.dataset.id) === selected;
     tr.classList.toggle("sel", on);
-    if (on) tr.scrollIntoView({ block: "nearest" });
+    if (on && scroll) tr.scrollIntoView({ block: "nearest" });
   }
 }
 function stepCamera(d) {
@@ -413,7 +437,7 @@ function setupInput() {
     if (acts[k]) { e.preventDefault(); acts[k](); }
   });
   const settingsChanged = () => { moved(true); if (selected >= 0 && $("compare").style.display !== "none") showCompare(selected); };
-  $("mode").onchange = () => { updateLegend(); settingsChanged(); };
+  $("mode").onchange = () => { updateLegend(); settingsChanged(); updateLink(); };
   $("bg").onchange = settingsChanged;
   $("gain").oninput = () => { $("gainv").textContent = gainValue().toFixed(2).replace(/\.?0+$/, "") + "×"; };
   $("gain").onchange = settingsChanged;
@@ -425,17 +449,16 @@ function setupInput() {
   $("fSplit").onchange = fillCameras;
 }
 
-async function start() {
-  try {
-    const r = await fetch("/api/info");
-    info = await r.json();
-  } catch (e) {
-    $("errmsg").textContent = "cannot read /api/info: " + e.message;
-    return;
-  }
-  up = info.scene.up; center = info.scene.center; radius = info.scene.radius;
-  $("sGauss").textContent = info.gaussians.toLocaleString();
-  const sel = $("mode");
+// ---- info: modes, cameras; refreshed when a live view has a new snapshot ----
+async function fetchInfo() {
+  const r = await fetch("/api/info");
+  const j = await r.json().catch(() => ({}));
+  if (!r.ok) { const e = new Error(j.error || r.statusText); e.status = r.status; throw e; }
+  return j;
+}
+function fillModes() {
+  const sel = $("mode"), keep = sel.value;
+  sel.innerHTML = "";
   for (const m of info.modes) {
     const o = document.createElement("option");
     o.value = m.id;
@@ -443,16 +466,91 @@ async function start() {
     if (!m.available) { o.disabled = true; o.title = m.why; }
     sel.appendChild(o);
   }
-  const first = info.modes.find(m => m.available && m.id === "rgb") || info.modes.find(m => m.available);
+  const wanted = keep || link.get("mode");
+  const first = info.modes.find(m => m.available && m.id === wanted) || info.modes.find(m => m.available && m.id === "rgb") ||
+                info.modes.find(m => m.available);
   if (first) sel.value = first.id;
+}
+
+// ---- live view: training progress, a fresh render when a new snapshot arrives ----
+let liveVersion = 0;
+function showLive(L) {
+  const el = $("live"), cur = L.models.length ? L.models[L.models.length - 1] : null;
+  el.hidden = false;
+  el.classList.toggle("done", L.state !== "training");
+  const which = cur ? (L.expected_models > 1 ? `model ${cur.key} (${L.models.length} of ${L.expected_models}) ` : "") +
+                      `step ${cur.step.toLocaleString()} / ${cur.end.toLocaleString()}` : "waiting for the first step";
+  el.textContent = (L.state === "training" ? "● training " : L.state === "done" ? "training done " : "training interrupted ") +
+                   `${L.strategy}: ${which} · snapshot ${L.version}`;
+}
+async function pollLive() {
+  let L = null;
+  try {
+    const r = await fetch("/api/live");
+    if (r.ok) L = await r.json();
+  } catch (e) {
+    $("live").textContent = "viewer stopped";
+    return;
+  }
+  if (L) {
+    showLive(L);
+    if (L.version > 0 && L.version !== liveVersion) {
+      try {
+        const was = info;
+        info = await fetchInfo();
+        liveVersion = L.version;
+        // Rebuild the mode list and the camera table only when a band model appeared (Separate,
+        // Split): rebuilding would close an open drop-down or scroll the page every second.
+        const modesSig = i => i.modes.map(m => m.available ? 1 : 0).join("");
+        const camsSig = i => i.cameras.map(c => c.rendered ? 1 : 0).join("");
+        if (modesSig(was) !== modesSig(info)) { fillModes(); updateLegend(); }
+        if (camsSig(was) !== camsSig(info)) fillCameras(false);
+        moved(true);  // the same camera, the new model
+        if (selected >= 0 && $("compare").style.display !== "none") showCompare(selected);
+      } catch (e) { /* the next poll tries again */ }
+    }
+  }
+  setTimeout(pollLive, !L || L.state === "training" ? 1000 : 5000);
+}
+
+function applyLink() {
+  if (link.has("bg") && [...$("bg").options].some(o => o.value === link.get("bg"))) $("bg").value = link.get("bg");
+  const w = parseInt(link.get("size"), 10);
+  if (w >= 64 && w <= 4096) {
+    if (![...$("size").options].some(o => o.value === String(w))) {
+      const o = document.createElement("option"); o.textContent = String(w); $("size").appendChild(o);
+    }
+    $("size").value = String(w);
+  }
+  if (link.get("lowres") === "0") $("lowres").checked = false;
+}
+
+async function start() {
+  for (;;) {
+    try {
+      info = await fetchInfo();
+      break;
+    } catch (e) {
+      if (e.status !== 503) { $("errmsg").textContent = "cannot read /api/info: " + e.message; return; }
+      $("errmsg").textContent = "waiting for the model: " + e.message;  // a live view before its first step
+      await sleep(500);
+    }
+  }
+  $("errmsg").textContent = "";
+  up = info.scene.up; center = info.scene.center; radius = info.scene.radius;
+  $("sGauss").textContent = info.gaussians.toLocaleString();
+  fillModes();
   if (!info.cameras.length) $("camsBox").style.display = "none";
   for (const b of [...new Set(info.cameras.map(c => c.band))]) {
     const o = document.createElement("option"); o.textContent = b; $("fBand").appendChild(o);
   }
+  applyLink();
   setupInput();
   updateLegend();
   fillCameras();
-  resetView();
+  const frame = link.has("frame") ? Number(link.get("frame")) : -1;
+  if (Number.isInteger(frame) && frame >= 0 && frame < info.cameras.length) jump(frame); else resetView();
+  if (info.live) { liveVersion = info.live.version; pollLive(); }
 }
 start();
 </script>

@@ -2,10 +2,13 @@
 // `msgs view` over HTTP: starts the tool on a free port (--port 0) with a small Joint model of the
 // tiny synthetic scene, sends a burst of bad requests (each must be a 4xx and the server must keep
 // serving), then good ones: a render decodes to the requested size, and /api/frame's render of a
-// dataset camera matches what `msgs render` writes for that camera.
+// dataset camera matches what `msgs render` writes for that camera. `msgs train --view`: the live
+// viewer follows a Separate run model by model, ends on the models the run wrote, keeps serving
+// after the run until Ctrl-C, and a second run on the same port fails before it trains.
 #include <doctest/doctest.h>
 
 #include "fixtures.hpp"
+#include "msgs_process.hpp"
 
 #include <msgs/gaussian.hpp>
 #include <msgs/init.hpp>
@@ -15,18 +18,15 @@
 
 #include <nlohmann/json.hpp>
 
-#include <fcntl.h>
 #include <signal.h>
-#include <spawn.h>
 #include <sys/wait.h>
-#include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
-#include <regex>
 #include <string>
 #include <thread>
 #include <vector>
@@ -34,68 +34,9 @@
 // After Eigen (via the msgs headers): httplib includes <resolv.h>, whose `_res` macro breaks Eigen.
 #include <httplib.h>
 
-extern char** environ;
-
 namespace fs = std::filesystem;
 
 namespace {
-
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return std::string(std::istreambuf_iterator<char>(in), {});
-}
-
-/// `msgs view ...` as a child process with stdout / stderr in files; SIGTERM on destruction.
-class ViewServer {
- public:
-  ViewServer(const std::vector<std::string>& args, const fs::path& dir)
-      : out_(dir / "view.out"), err_(dir / "view.err") {
-    std::vector<std::string> argv = {MSGS_BIN, "view"};
-    argv.insert(argv.end(), args.begin(), args.end());
-    std::vector<char*> cargv;
-    for (auto& a : argv) cargv.push_back(a.data());
-    cargv.push_back(nullptr);
-    posix_spawn_file_actions_t fa;
-    posix_spawn_file_actions_init(&fa);
-    posix_spawn_file_actions_addopen(&fa, 1, out_.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_addopen(&fa, 2, err_.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    const int rc = posix_spawn(&pid_, MSGS_BIN, &fa, nullptr, cargv.data(), environ);
-    posix_spawn_file_actions_destroy(&fa);
-    REQUIRE_MESSAGE(rc == 0, "cannot start " MSGS_BIN);
-    // The chosen port is printed once the socket is bound.
-    const std::regex re("serving http://127\\.0\\.0\\.1:([0-9]+)/");
-    const auto t0 = std::chrono::steady_clock::now();
-    while (std::chrono::steady_clock::now() - t0 < std::chrono::seconds(60)) {
-      std::smatch m;
-      const std::string s = slurp(out_);
-      if (std::regex_search(s, m, re)) { port_ = std::stoi(m[1]); return; }
-      int status = 0;
-      if (waitpid(pid_, &status, WNOHANG) == pid_) {
-        pid_ = -1;
-        FAIL("msgs view exited early: " << slurp(err_));
-      }
-      std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    }
-    FAIL("msgs view printed no URL within 60 s: " << slurp(err_));
-  }
-  ~ViewServer() { (void)stop(); }
-  /// SIGTERM and wait; the exit status (0 = clean shutdown), or -1 when it was not running.
-  int stop() {
-    if (pid_ <= 0) return -1;
-    kill(pid_, SIGTERM);
-    int status = 0;
-    waitpid(pid_, &status, 0);
-    pid_ = -1;
-    return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
-  }
-  int port() const { return port_; }
-  std::string log() const { return slurp(err_); }
-
- private:
-  fs::path out_, err_;
-  pid_t pid_ = -1;
-  int port_ = 0;
-};
 
 msgs::Image<float> decode(const std::string& bytes, const fs::path& p) {
   std::ofstream(p, std::ios::binary).write(bytes.data(), std::streamsize(bytes.size()));
@@ -125,7 +66,7 @@ TEST_CASE("msgs view: bad requests are 4xx, renders decode at their size, frames
     const auto m = msgs::init_from_points<msgs::Gaussian<7, 1>>(ds.points.xyz, cfg);
     msgs::io::write_ply(model, m, msgs::io::joint_channel_names());
   }
-  ViewServer server({"--model", model.string(), "--data", ds.root.string(), "--port", "0"}, dir);
+  msgs::testing::MsgsServer server("view", {"--model", model.string(), "--data", ds.root.string(), "--port", "0"}, dir);
   httplib::Client cli("127.0.0.1", server.port());
   cli.set_read_timeout(30, 0);
 
@@ -264,11 +205,104 @@ TEST_CASE("msgs view: bad requests are 4xx, renders decode at their size, frames
     const int rc = std::system(cmd.c_str());
     CHECK(WIFEXITED(rc));
     CHECK(WEXITSTATUS(rc) == 1);
-    CHECK(slurp(dir / "second.log").find("cannot listen") != std::string::npos);
+    CHECK(msgs::testing::slurp(dir / "second.log").find("cannot listen") != std::string::npos);
     const auto still = cli.Get("/api/info");
     REQUIRE(still);
     CHECK(still->status == 200);
   }
 
   CHECK(server.stop() == 0);  // SIGTERM shuts down cleanly
+}
+
+TEST_CASE("msgs train --view: live snapshots of every band model, served until Ctrl-C after the run") {
+  const msgs::io::Dataset& ds = msgs::testing::tiny_scene("view_http", 5);
+  const fs::path dir = msgs::testing::scratch_dir("view_http_live");
+  const fs::path run = dir / "run";
+  fs::remove_all(run);
+  // Separate: five band models one after the other, 60 steps each.
+  msgs::testing::MsgsServer server("train", {"--data", ds.root.string(), "--out", run.string(), "--strategy", "separate",
+                                             "--scale", "0.002", "--sheets", "0", "--quiet", "--view", "0"},
+                                   dir, 120);
+  httplib::Client cli("127.0.0.1", server.port());
+  cli.set_read_timeout(30, 0);
+
+  // Follow the run: snapshot versions only grow, band models appear one by one.
+  std::uint64_t last_version = 0;
+  std::size_t most_models = 0;
+  nlohmann::json live;
+  const auto t0 = std::chrono::steady_clock::now();
+  while (std::chrono::steady_clock::now() - t0 < std::chrono::seconds(120)) {
+    const auto r = cli.Get("/api/live");
+    REQUIRE(r);
+    REQUIRE(r->status == 200);
+    live = nlohmann::json::parse(r->body);
+    const auto v = live["version"].get<std::uint64_t>();
+    CHECK(v >= last_version);
+    last_version = v;
+    most_models = std::max(most_models, live["models"].size());
+    if (v == 0) {
+      const auto info = cli.Get("/api/info");  // nothing to show yet: 503, not an error page
+      REQUIRE(info);
+      CHECK((info->status == 503 || info->status == 200));
+    }
+    if (live["state"] != "training") break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  REQUIRE(live["state"] == "done");
+  MESSAGE("followed the run to snapshot " << last_version << "; at most " << most_models << " models while polling");
+  CHECK(live["strategy"] == "separate");
+  CHECK(live["expected_models"] == 5);
+  REQUIRE(live["models"].size() == 5);
+  std::size_t gaussians = 0;
+  for (const auto& m : live["models"]) {
+    CHECK(m["step"] == m["end"]);
+    gaussians += m["gaussians"].get<std::size_t>();
+  }
+  const std::string out = server.out();
+  CHECK(out.find("training done; viewer still at http://127.0.0.1:") != std::string::npos);
+  CHECK(fs::exists(run / "result.json"));
+
+  // The page sees the live run; the last snapshots are the models the run wrote: a frame renders
+  // as `msgs render` renders the written PLYs.
+  const auto info = cli.Get("/api/info");
+  REQUIRE(info);
+  REQUIRE(info->status == 200);
+  const nlohmann::json j = nlohmann::json::parse(info->body);
+  CHECK(j.contains("live"));
+  CHECK(j["gaussians"].get<std::size_t>() == gaussians);
+  const fs::path rendered = dir / "rendered";
+  fs::remove_all(rendered);
+  const std::string cmd = std::string(MSGS_BIN) + " render --data '" + ds.root.string() + "' --model '" + run.string() +
+                          "' --out '" + rendered.string() + "' --no-composites > '" + (dir / "render.log").string() +
+                          "' 2>&1";
+  REQUIRE(std::system(cmd.c_str()) == 0);
+  for (const char* band : {"D", "MS_NIR"}) {
+    CAPTURE(band);
+    std::size_t id = 0;
+    while (ds.frames[id].band != band) ++id;
+    const auto res = cli.Get(("/api/frame?id=" + std::to_string(id) + "&bg=black&scale=1&format=png").c_str());
+    REQUIRE(res);
+    REQUIRE(res->status == 200);
+    const msgs::Image<float> mine = decode(res->body, dir / "frame.png");
+    const msgs::Image<float> ref =
+        msgs::io::read_image(rendered / (fs::path(ds.frames[id].file_path).stem().string() + ".png"));
+    REQUIRE(mine.data.size() == ref.data.size());
+    float worst = 0;
+    for (std::size_t i = 0; i < mine.data.size(); ++i) worst = std::max(worst, std::abs(mine.data[i] - ref.data[i]));
+    CHECK(worst <= 1.01f / 255.0f);
+  }
+
+  // Another run asking for the same port fails before it trains (no output directory).
+  const fs::path run2 = dir / "run2";
+  fs::remove_all(run2);
+  const std::string busy = "timeout 60 " + std::string(MSGS_BIN) + " train --data '" + ds.root.string() + "' --out '" +
+                           run2.string() + "' --strategy separate --scale 0.002 --view " +
+                           std::to_string(server.port()) + " > '" + (dir / "busy.log").string() + "' 2>&1";
+  const int rc = std::system(busy.c_str());
+  CHECK(WIFEXITED(rc));
+  CHECK(WEXITSTATUS(rc) != 0);
+  CHECK(msgs::testing::slurp(dir / "busy.log").find("cannot listen") != std::string::npos);
+  CHECK_FALSE(fs::exists(run2 / "result.json"));
+
+  CHECK(server.stop(SIGINT) == 0);  // Ctrl-C ends the viewer after a finished run
 }

@@ -186,10 +186,13 @@ GaussianModel<G, float> train_model(const io::Dataset& ds, std::vector<TrainBand
     ckpt = out_dir / "checkpoints" / (key + ".ckpt");
   }
   topt.checkpoint_path = ckpt;
+  if (topt.on_step)  // tell the hook which model it sees
+    topt.on_step = [hook = topt.on_step, key](const StepView& v) { StepView k = v; k.key = key; hook(k); };
   Trainer<G> tr(ds, std::move(bands), std::move(model), spec.plan, spec.hooks, topt);
   tr.adam().iteration = adam_iteration;
   if (cfg.resume && !ckpt.empty() && std::filesystem::exists(ckpt)) begin = tr.restore(load_checkpoint<G>(ckpt));
   const long long reached = begin >= end ? end : tr.train(begin, end);
+  if (begin >= end && topt.on_step) topt.on_step(StepView::of(tr.model(), tr.bands(), end, begin, end));  // resumed, done
   res.steps += reached - begin;
   if (reached < end) res.interrupted = true;
   else tr.finish_curve(end);

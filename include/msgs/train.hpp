@@ -14,6 +14,7 @@
 #include <span>
 #include <stdexcept>
 #include <string>
+#include <typeinfo>
 #include <utility>
 #include <vector>
 
@@ -67,6 +68,30 @@ struct TrainProgress {
   DensifyReport last_refine;         ///< most recent refinement
 };
 
+/// The model right after a step, for TrainOptions::on_step: read-only and valid during the call
+/// only. The model is type-erased so that the callback need not be a template; model<G>() gives
+/// it back as GaussianModel<G, float> (nullptr for any other G). snapshot.hpp copies it from here.
+struct StepView {
+  long long step = 0, begin = 0, end = 0;        ///< steps done (the step just taken + 1), the range
+  std::string key;                               ///< which model of a run ("joint" or a band id; run.hpp)
+  const std::vector<TrainBand>* bands = nullptr;  ///< the bands this model trains
+  int channels = 0, sh_degree = 0;               ///< G::bands, G::sh_degree
+  std::size_t gaussians = 0;
+  const void* model_ptr = nullptr;
+  const std::type_info* model_type = nullptr;
+
+  template <class G>
+  const GaussianModel<G, float>* model() const {
+    return model_type && *model_type == typeid(GaussianModel<G, float>)
+               ? static_cast<const GaussianModel<G, float>*>(model_ptr) : nullptr;
+  }
+  template <class G>
+  static StepView of(const GaussianModel<G, float>& m, const std::vector<TrainBand>& bands, long long step,
+                     long long begin, long long end) {
+    return {step, begin, end, {}, &bands, G::bands, G::sh_degree, m.size(), &m, &typeid(GaussianModel<G, float>)};
+  }
+};
+
 /// Options of a training run that are not part of the strategy's plan. The defaults follow the
 /// multi-spectral reference implementation (REFERENCE §9); presets.hpp names the departures.
 struct TrainOptions {
@@ -97,6 +122,9 @@ struct TrainOptions {
   double scene_scale = 1.0;
   int progress_every = 25;           ///< steps between progress callbacks
   std::function<void(const TrainProgress&)> on_progress;
+  /// Called after every step, between steps, with the model (live viewers: snapshot.hpp). It only
+  /// reads; training is bit-identical with and without it.
+  std::function<void(const StepView&)> on_step;
   const std::atomic<bool>* stop = nullptr;  ///< set by a signal handler: stop after the current step
   bool check_finite = false;         ///< verify every parameter is finite after each step (soak runs)
   /// false (default): dense Adam over every Gaussian, zero gradients for the ones the view did not
@@ -443,6 +471,11 @@ class Trainer {
       times_.densify += seconds(t5, t6);
 
       if (opt_.check_finite) check_finite(step);
+      if (opt_.on_step) {  // off the training clock, like anytime evaluations
+        tick();
+        opt_.on_step(StepView::of(model_, bands_, step + 1, begin, end));
+        mark = clock::now();
+      }
       if (opt_.on_progress && ((step + 1 - begin) % std::max(1, opt_.progress_every) == 0 || step + 1 == end)) {
         TrainProgress pr;
         pr.step = step + 1; pr.begin = begin; pr.end = end;
