@@ -19,7 +19,7 @@
 #endif
 
 #include <msgs/io/file.hpp>
-#include <msgs/study.hpp>
+#include "study_report.hpp"
 
 #include "study_convergence.hpp"
 

@@ -17,7 +17,7 @@
 #include <msgs/curve.hpp>
 #include <msgs/io/dataset.hpp>
 #include <msgs/io/file.hpp>
-#include <msgs/study.hpp>
+#include "study_report.hpp"
 
 namespace msgs::cli {
 
@@ -92,7 +92,8 @@ inline std::string convergence_csv(const std::vector<RunCurves>& runs) {
 
 /// Markdown: per run its final All PSNR on the curve's subset, training seconds, and when it
 /// settled (within 0.5 dB of its final value); then, for every pair of runs, where their All
-/// PSNR curves cross and who leads at the end of the shorter one.
+/// PSNR curves cross. A run that has finished keeps its final quality from then on (the model one
+/// would have at that time), so a fast run and a slow one are compared over the slow one's time.
 inline std::string convergence_markdown(const std::vector<RunCurves>& runs) {
   std::string out = "## Quality against training time (All PSNR on the anytime-evaluation subset)\n\n";
   out += "| run | final All PSNR | training s | settled (within 0.5 dB of final) from s |\n|---|---|---|---|\n";
@@ -104,21 +105,25 @@ inline std::string convergence_markdown(const std::vector<RunCurves>& runs) {
            " |\n";
   }
   out += "\n## Crossings of the All PSNR curves\n\n";
-  out += "Curves are piecewise linear through the evaluations; only the time both runs cover counts.\n\n";
-  out += "| run A | run B | A leads at the end of the shorter run | crossings (s: leader after) |\n|---|---|---|---|\n";
+  out += "Curves are piecewise linear through the evaluations, from the first time both runs have an All "
+         "value (Separate and Split have one once their last band's model starts); a finished run keeps its "
+         "final value.\n\n";
+  out += "| run A | run B | A - B at the end | crossings (s: leader after) |\n|---|---|---|---|\n";
   for (std::size_t a = 0; a < runs.size(); ++a)
     for (std::size_t b = a + 1; b < runs.size(); ++b) {
       const auto ia = runs[a].series.find("All"), ib = runs[b].series.find("All");
       if (ia == runs[a].series.end() || ib == runs[b].series.end() || ia->second.empty() || ib->second.empty()) continue;
-      const auto ta = detail::column(ia->second, 0), va = detail::column(ia->second, 1);
-      const auto tb = detail::column(ib->second, 0), vb = detail::column(ib->second, 1);
+      auto ta = detail::column(ia->second, 0), va = detail::column(ia->second, 1);
+      auto tb = detail::column(ib->second, 0), vb = detail::column(ib->second, 1);
+      const double end = std::max(ta.back(), tb.back());
+      for (auto tv : {std::make_pair(&ta, &va), std::make_pair(&tb, &vb)})
+        if (tv.first->back() < end) { tv.first->push_back(end); tv.second->push_back(tv.second->back()); }
       const std::vector<Crossing> xs = crossings(ta, va, tb, vb, 1e-3);
-      const double end = std::min(ta.back(), tb.back());
       const double d = curve_at(ta, va, end) - curve_at(tb, vb, end);
       std::string xl;
       for (const auto& x : xs) xl += (xl.empty() ? "" : ", ") + detail::fmt(x.seconds, "%.0f") + ": " + (x.a_ahead_after ? runs[a].label : runs[b].label);
-      out += "| " + runs[a].label + " | " + runs[b].label + " | " + (d > 0 ? "yes" : "no") + " (" + detail::fmt(d, "%+.2f") +
-             " dB at " + detail::fmt(end, "%.0f") + " s) | " + (xl.empty() ? "none" : xl) + " |\n";
+      out += "| " + runs[a].label + " | " + runs[b].label + " | " + detail::fmt(d, "%+.2f") + " dB at " +
+             detail::fmt(end, "%.0f") + " s | " + (xl.empty() ? "none" : xl) + " |\n";
     }
   return out;
 }

@@ -77,6 +77,25 @@ Image<T> cast_image(const Image<S>& im) {
 
 struct Size3 { int w, h, c; };
 
+/// `grad` against central differences (h = 1e-6) of the double reference loss at x.
+void check_gradient_fd(Image<double> x, const Image<double>& y, const Image<double>& grad, bool valid) {
+  const double h = 1e-6;
+  double max_err = 0, max_g = 0;
+  for (std::size_t i = 0; i < x.size(); ++i) {
+    const double x0 = x.data[i];
+    x.data[i] = x0 + h;
+    const double lp = ref_loss(x, y, valid);
+    x.data[i] = x0 - h;
+    const double lm = ref_loss(x, y, valid);
+    x.data[i] = x0;
+    const double fd = (lp - lm) / (2 * h);
+    max_err = std::max(max_err, std::abs(fd - grad.data[i]));
+    max_g = std::max(max_g, std::abs(fd));
+  }
+  CAPTURE(max_g);
+  CHECK(max_err < 1e-8 + 1e-5 * max_g);
+}
+
 }  // namespace
 
 TEST_CASE("ssim window is a normalised Gaussian of sigma 1.5") {
@@ -137,21 +156,7 @@ TEST_CASE("photometric loss gradient matches central differences of the referenc
     const double value = msgs::photometric_loss(x, y, &grad, ws);
     CHECK(value == doctest::Approx(ref_loss(x, y)).epsilon(1e-12));
     REQUIRE(grad.size() == x.size());
-    const double h = 1e-6;
-    double max_err = 0, max_g = 0;
-    for (std::size_t i = 0; i < x.size(); ++i) {
-      const double x0 = x.data[i];
-      x.data[i] = x0 + h;
-      const double lp = ref_loss(x, y);
-      x.data[i] = x0 - h;
-      const double lm = ref_loss(x, y);
-      x.data[i] = x0;
-      const double fd = (lp - lm) / (2 * h);
-      max_err = std::max(max_err, std::abs(fd - grad.data[i]));
-      max_g = std::max(max_g, std::abs(fd));
-    }
-    CAPTURE(max_g);
-    CHECK(max_err < 1e-8 + 1e-5 * max_g);
+    check_gradient_fd(x, y, grad, false);
   }
 }
 
@@ -179,21 +184,7 @@ TEST_CASE("valid-window SSIM (pytorch-msssim) matches the direct reference, valu
     (void)msgs::photometric_loss(x, y, &grad, ws);  // same mode first, to dirty the workspace
     const double value = msgs::photometric_loss(x, y, &grad, ws, cfg);
     CHECK(value == doctest::Approx(ref_loss(x, y, true)).epsilon(1e-12));
-    const double h = 1e-6;
-    double max_err = 0, max_g = 0;
-    for (std::size_t i = 0; i < x.size(); ++i) {
-      const double x0 = x.data[i];
-      x.data[i] = x0 + h;
-      const double lp = ref_loss(x, y, true);
-      x.data[i] = x0 - h;
-      const double lm = ref_loss(x, y, true);
-      x.data[i] = x0;
-      const double fd = (lp - lm) / (2 * h);
-      max_err = std::max(max_err, std::abs(fd - grad.data[i]));
-      max_g = std::max(max_g, std::abs(fd));
-    }
-    CAPTURE(max_g);
-    CHECK(max_err < 1e-8 + 1e-5 * max_g);
+    check_gradient_fd(x, y, grad, true);
   }
 }
 

@@ -1,6 +1,7 @@
 // tests/test_study.cpp
-// Tests of study.hpp: run lists, Pareto front, rank correlation, CSV / Markdown / gnuplot writers,
-// job lines against a real shell, aggregation of result.json files, and two tiny real runs.
+// Tests of study.hpp (run lists, Pareto front, rank correlation) and of the tool side in
+// examples/study_report.hpp (CSV / Markdown / gnuplot writers, job lines against a real shell,
+// aggregation of result.json files), and two tiny real runs.
 #include <doctest/doctest.h>
 
 #include <algorithm>
@@ -17,6 +18,9 @@
 
 #include <msgs/run.hpp>
 #include <msgs/study.hpp>
+
+#include "../examples/study_convergence.hpp"  // the tool side: curves of the convergence study
+#include "../examples/study_report.hpp"       // the tool side: summaries, tables, job files
 #include <msgs/synth.hpp>
 
 #include "../examples/report.hpp"  // the result.json writer of `msgs train`, which collect must read
@@ -333,6 +337,50 @@ TEST_CASE("job lines: a POSIX shell splits them into the arguments, and they par
   CHECK_THROWS_AS(parse_job_line("msgs train --data 'x"), std::invalid_argument);
   CHECK_THROWS_AS(parse_job_line("msgs train --data x --out y --strategy joint+bogus"), std::invalid_argument);
   CHECK_THROWS_AS(parse_job_line("msgs render --data x"), std::invalid_argument);
+}
+
+TEST_CASE("convergence: strategies x presets with the anytime evaluation, carried through job lines") {
+  StudyOptions o;
+  o.scale = 0.02;
+  o.presets = {"reference", "fast"};
+  o.curve_seconds = 7.5;
+  const std::vector<StudyRun> runs = convergence_runs(o);
+  REQUIRE(runs.size() == 8);
+  std::set<std::string> ids;
+  for (const auto& r : runs) {
+    ids.insert(r.id);
+    CHECK(r.curve_seconds == 7.5);
+    CHECK(r.id.ends_with("_fast") == (r.preset == "fast"));
+    const ParsedJob j = parse_job_line(job_line(r, "/opt/msgs", "/data", "/out"));
+    CHECK(j.run.preset == r.preset);
+    CHECK(j.run.curve_seconds == 7.5);
+    CHECK(j.run.id == r.id);
+  }
+  CHECK(ids.size() == 8);
+  CHECK(runs[3].labels[0].value == "joint-optimized (reference)");
+  o.presets = {"quick"};
+  CHECK_THROWS_AS(convergence_runs(o), std::invalid_argument);
+  o.presets = {"reference"};
+  o.curve_seconds = 0;
+  CHECK_THROWS_AS(convergence_runs(o), std::invalid_argument);
+}
+
+TEST_CASE("convergence report: a finished run keeps its final value, and the crossing is found") {
+  // A rises 10 -> 20 dB over 10 s; B reaches 16 dB at 5 s and stops: A overtakes it at 6 s.
+  msgs::cli::RunCurves a, b;
+  a.id = a.label = "slow";
+  b.id = b.label = "quick";
+  a.series["All"] = {{0, 10, 0.1}, {10, 20, 0.2}};
+  b.series["All"] = {{0, 15, 0.1}, {5, 16, 0.2}};
+  a.final_seconds = 10;
+  b.final_seconds = 5;
+  const std::string md = msgs::cli::convergence_markdown({a, b});
+  CHECK(md.find("| slow | quick | +4.00 dB at 10 s | 6: slow |") != std::string::npos);
+  const std::string csv = msgs::cli::convergence_csv({a, b});
+  CHECK(csv.find("quick,quick,All,5.000,16.0000,0.20000") != std::string::npos);
+  const std::string gp = msgs::cli::convergence_gnuplot({a, b}, "t");
+  CHECK(gp.find("curves_All.png") != std::string::npos);
+  CHECK(gp.find("curves_RGB.png") == std::string::npos);  // no RGB series
 }
 
 TEST_CASE("collect: manifest runs read from result.json, missing ones reported; without a manifest too") {

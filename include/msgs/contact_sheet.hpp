@@ -83,22 +83,6 @@ inline SheetLayout contact_sheet_layout(const SheetCells& rows, int gap) {
   return L;
 }
 
-/// Compose `rows` into one RGB image [height, width, 3] (see contact_sheet_layout); each image
-/// sits at the top-left of its cell, grey images are replicated to RGB, the rest is `fill`.
-inline Image<float> contact_sheet(const SheetCells& rows, int gap = 4, float fill = 1.0f) {
-  const SheetLayout L = contact_sheet_layout(rows, gap);
-  Image<float> out(L.width, L.height, 3, fill);
-  for (std::size_t r = 0; r < rows.size(); ++r)
-    for (std::size_t c = 0; c < rows[r].size(); ++c) {
-      const Image<float>* im = rows[r][c];
-      if (!im) continue;
-      const Image<float> rgb = to_rgb(*im);
-      for (int y = 0; y < rgb.height; ++y)
-        for (int x = 0; x < rgb.width; ++x)
-          for (int k = 0; k < 3; ++k) out.at(L.col_x[c] + x, L.row_y[r] + y, k) = rgb.at(x, y, k);
-    }
-  return out;
-}
 
 /// The words of a contact sheet; every part is optional.
 struct SheetLabels {
@@ -201,6 +185,12 @@ inline Image<float> contact_sheet(const SheetCells& rows, const SheetLabels& lab
         for (int k = 0; k < 3; ++k) out.at(L.col_x[l.column] + x, L.legend_y[l.row] + y, k) = strip.at(x, y, k);
   }
   return out;
+}
+
+/// Compose `rows` into one RGB image [height, width, 3] (see contact_sheet_layout); each image
+/// sits at the top-left of its cell, grey images are replicated to RGB, the rest is `fill`.
+inline Image<float> contact_sheet(const SheetCells& rows, int gap = 4, float fill = 1.0f) {
+  return contact_sheet(rows, SheetLabels{}, gap, fill, nullptr);  // without text: the grid alone
 }
 
 }  // namespace msgs

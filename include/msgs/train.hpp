@@ -513,12 +513,7 @@ class Trainer {
       m.band = band.id;
       const auto& frames = eval_split ? band.eval_frames : band.train_frames;
       for (std::size_t f : frames) {
-        RenderSettings<float> rs;
-        rs.band_first = band.first_channel;
-        rs.band_count = band.channels;
-        rs.background = eval_background<float>(band.channels);
-        Image<float> render = raster.forward(model_, full.camera(f, 1), rs);
-        clamp01(render);
+        const Image<float> render = eval_render(raster, full, band, f);
         const Image<float>& gt = full.get(f, 1);
         m.psnr.push_back(psnr(render, gt));
         m.ssim.push_back(ssim(render, gt, opt_.eval_ssim));
@@ -537,6 +532,19 @@ class Trainer {
  private:
   static double seconds(std::chrono::steady_clock::time_point a, std::chrono::steady_clock::time_point b) {
     return std::chrono::duration<double>(b - a).count();
+  }
+
+  /// Frame `f` of `band` as evaluation sees it: full resolution, the evaluation background,
+  /// clamped to [0, 1].
+  Image<float> eval_render(Rasterizer<G, float, kTrainRaster>& raster, ImageCache& images, const TrainBand& band,
+                           std::size_t f) {
+    RenderSettings<float> rs;
+    rs.band_first = band.first_channel;
+    rs.band_count = band.channels;
+    rs.background = eval_background<float>(band.channels);
+    Image<float> render = raster.forward(model_, images.camera(f, 1), rs);
+    clamp01(render);
+    return render;
   }
 
   std::filesystem::path curve_path() const {
@@ -578,12 +586,7 @@ class Trainer {
       const std::vector<std::size_t> pick = curve_subset(band.eval_frames.size(), opt_.curve.images);
       for (std::size_t k : pick) {
         const std::size_t f = band.eval_frames[k];
-        RenderSettings<float> rs;
-        rs.band_first = band.first_channel;
-        rs.band_count = band.channels;
-        rs.background = eval_background<float>(band.channels);
-        Image<float> render = raster.forward(model_, curve_images_.camera(f, 1), rs);
-        clamp01(render);
+        const Image<float> render = eval_render(raster, curve_images_, band, f);
         const Image<float>& gt = curve_images_.get(f, 1);
         sp += psnr(render, gt);
         ss += ssim(render, gt, opt_.eval_ssim);
