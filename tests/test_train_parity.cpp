@@ -129,6 +129,11 @@ TEST_CASE("anytime evaluation: points at the requested steps, training bit-ident
   Trainer<G> c = make_trainer("joint", 0.05, ck);
   c.train(0, 15);
   const double clock15 = c.clock();
+  TrainOptions no_curve = plain;  // resumed without the anytime evaluation: the curve file is ignored
+  no_curve.checkpoint_path = ck.checkpoint_path;
+  Trainer<G> e = make_trainer("joint", 0.05, no_curve);
+  CHECK(e.restore(load_checkpoint<G>(ck.checkpoint_path)) == 15);
+  CHECK(e.curve().empty());
   Trainer<G> d = make_trainer("joint", 0.05, ck);
   const long long next = d.restore(load_checkpoint<G>(ck.checkpoint_path));
   CHECK(next == 15);

@@ -312,7 +312,7 @@ class Trainer {
   /// Continue from a saved state; returns the step to resume at. The anytime-evaluation curve and
   /// the training clock continue from the file next to the checkpoint when there is one.
   long long restore(TrainState<G> st) {
-    if (!opt_.checkpoint_path.empty() && std::filesystem::exists(curve_path())) {
+    if (opt_.curve.enabled() && !opt_.checkpoint_path.empty() && std::filesystem::exists(curve_path())) {
       auto [clock, points] = load_curve(curve_path());
       clock_ = clock;
       curve_ = std::move(points);
