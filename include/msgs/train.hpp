@@ -50,10 +50,15 @@ struct TrainBand {
 /// Wall-clock seconds per stage of training, summed over steps.
 struct StageTimes {
   double load = 0, project = 0, bin = 0, blend = 0, loss = 0, backward = 0, adam = 0, densify = 0, eval = 0;
+  /// Parts of `backward`: the blend backward, and the per-Gaussian gradient reduction with the
+  /// projection and colour backward (the rest of `backward` is the clamp, exposure and scale
+  /// regulariser).
+  double backward_blend = 0, backward_gaussians = 0;
   double total() const { return load + project + bin + blend + loss + backward + adam + densify + eval; }
   StageTimes& operator+=(const StageTimes& o) {
     load += o.load; project += o.project; bin += o.bin; blend += o.blend; loss += o.loss;
     backward += o.backward; adam += o.adam; densify += o.densify; eval += o.eval;
+    backward_blend += o.backward_blend; backward_gaussians += o.backward_gaussians;
     return *this;
   }
 };
@@ -450,6 +455,8 @@ class Trainer {
       times_.blend += raster.timings().blend;
       times_.loss += seconds(t2, t3);
       times_.backward += seconds(t3, t4);
+      times_.backward_blend += raster.timings().blend_backward;
+      times_.backward_gaussians += raster.timings().project_backward;
 
       // 5. The strategy's masks, then Adam.
       StepContext ctx;
