@@ -16,6 +16,7 @@
 #include "data_options.hpp"
 #include "experiment.hpp"
 #include "live_view.hpp"
+#include "memory_guard.hpp"
 #include "render_dispatch.hpp"
 #include "report.hpp"
 #include "run_sheets.hpp"
@@ -26,7 +27,8 @@ namespace {
 constexpr const char* kUsage =
     "usage: msgs train --data DIR --out DIR [--strategy NAME] [--scale F] [--sh-degree D]\n"
     "                  [--bands D,MS_G,...] [--seed S] [--orient none|center] [--resume] [--checkpoint-every N]\n"
-    "                  [--sheets N] [--max-gaussians N] [--images NAME] [--eval-every N] [--geometry-band ID]\n"
+    "                  [--sheets N] [--max-gaussians N] [--stop-gaussians N] [--images NAME] [--eval-every N]\n"
+    "                  [--geometry-band ID]\n"
     "                  [--exposure [--lr-exposure X]] [--preset reference|fast] [--ssim valid|same]\n"
     "                  [--no-clamp] [--shuffle every-pass|once] [--adam sparse|dense] [--lr-sh-dc X]\n"
     "                  [--eval-every-seconds T] [--eval-every-steps N] [--eval-images K]\n"
@@ -58,6 +60,10 @@ constexpr const char* kUsage =
     "                    another, e.g. MS_NIR); other strategies ignore it\n"
     "  --max-gaussians N densification grows each model to at most N Gaussians, largest\n"
     "                    gradients first (default 0: no limit)\n"
+    "  --stop-gaussians N stop the run with an error when a refinement would grow a model beyond\n"
+    "                    N Gaussians (default: what fits in three quarters of the memory available\n"
+    "                    at the start; 0 = never). Runaway densification then ends with a message\n"
+    "                    instead of running out of memory; below the limit results are unchanged\n"
     MSGS_TRAIN_OPTIONS_USAGE
     "  --exposure        learn a per-image exposure correction: a gain exp(a_c) and an offset b_c per\n"
     "                    channel of every training image, applied to its render before the loss\n"
@@ -96,7 +102,7 @@ using msgs::cli::split_list;
 
 int run_train(const std::vector<std::string>& argv) {
   std::vector<std::string> values = {"data", "images", "eval-every", "out", "strategy", "scale", "sh-degree", "bands", "seed",
-                                     "checkpoint-every", "orient", "densify", "sheets", "max-gaussians", "geometry-band",
+                                     "checkpoint-every", "orient", "densify", "sheets", "max-gaussians", "stop-gaussians", "geometry-band",
                                      "lr-exposure", "view", "host"};
   std::vector<std::string> flags = {"help", "no-orient", "quiet", "resume", "exposure"};
   for (const auto& k : msgs::cli::train_option_values()) values.push_back(k);
@@ -148,6 +154,23 @@ int run_train(const std::vector<std::string>& argv) {
 
   msgs::validate_run(ds, cfg);  // before anything is written: missing bands, no geometry band
   std::vector<std::string> band_ids = cfg.bands.empty() ? ds.bands() : cfg.bands;
+  {  // runaway densification stops with an error before memory runs out
+    int channels = 0;
+    if (msgs::parse_strategy(cfg.strategy).plan.kind == msgs::StrategyKind::Joint) {
+      for (const auto& b : msgs::io::standard_bands()) channels += b.channels;
+    } else {
+      for (const auto& b : msgs::io::standard_bands())
+        if (std::find(band_ids.begin(), band_ids.end(), b.id) != band_ids.end()) channels = std::max(channels, b.channels);
+    }
+    const int K = (int(deg) + 1) * (int(deg) + 1);
+    cfg.stop_gaussians = msgs::cli::stop_gaussians_for(msgs::cli::available_memory_bytes(),
+                                                       msgs::cli::training_bytes_per_gaussian(std::max(channels, 1), K));
+    if (args.has("stop-gaussians")) {
+      const long stop = args.integer("stop-gaussians", 0);
+      if (stop < 0) throw msgs::cli::UsageError("--stop-gaussians must be >= 0 (0 = never)");
+      cfg.stop_gaussians = std::size_t(stop);
+    }
+  }
   msgs::SnapshotStore snapshots;  // --view: the models as they train
   const std::unique_ptr<msgs::cli::LiveView> live = msgs::cli::start_live_view(args, ds, snapshots, cfg, band_ids.size());
   const bool quiet = args.flag("quiet");

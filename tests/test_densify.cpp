@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <limits>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "msgs/densify.hpp"
@@ -317,6 +318,46 @@ TEST_CASE("max_gaussians: the largest gradients grow first, the rest wait, pruni
   CHECK(c.duplicated + c.split == 0);
   CHECK(c.pruned == 1);
   CHECK(m.size() == 5);
+}
+
+TEST_CASE("stop_gaussians: a refinement that would grow past it throws before touching the model") {
+  // The growth of the max_gaussians case above: 6 -> 11 Gaussians unlimited.
+  Model ref = make_model(6);
+  for (int a = 0; a < 3; ++a) ref.log_scales[3 * 5 + a] = float(std::log(0.05));
+  const std::vector<double> grad{0.002, 0.005, 0.003, 0.005, 0.0001, 0.004};
+  auto refine_stopped = [&](std::size_t stop, std::size_t cap, Model& m) {
+    DensifyConfig cfg = DensifyConfig::msad();
+    cfg.stop_gaussians = stop;
+    cfg.max_gaussians = cap;
+    DensityControl dc(cfg, 1, 0, 1.0);
+    dc.observe(600, 0, grads_with_ndc_norm(grad, 100).absgrad, radii_all(6, 1), 100, 100);
+    m = ref;
+    RefineCounts c;
+    return dc.refine(600, m, c);
+  };
+  Model m;
+  // At or above the grown size: no effect, the same plan as without the guard.
+  const RefinePlan free = refine_stopped(0, 0, m);
+  CHECK(m.size() == 11);
+  CHECK(refine_stopped(11, 0, m).source == free.source);
+  CHECK(m.size() == 11);
+  // One below: the error names the step, both sizes and the limit; the model is unchanged.
+  try {
+    refine_stopped(10, 0, m);
+    FAIL("expected DensifyLimitError");
+  } catch (const DensifyLimitError& e) {
+    CHECK(e.step == 600);
+    CHECK(e.before == 6);
+    CHECK(e.after == 11);
+    CHECK(e.limit == 10);
+    CHECK(std::string(e.what()).find("from 6 to 11 Gaussians") != std::string::npos);
+    CHECK(std::string(e.what()).find("--max-gaussians") != std::string::npos);
+  }
+  CHECK(m.size() == 6);
+  CHECK(m.means == ref.means);
+  // The growth budget applies first: capped at 9, a stop at 9 is not reached.
+  refine_stopped(9, 9, m);
+  CHECK(m.size() == 9);
 }
 
 TEST_CASE("split samples keep scale / 1.6 and are distributed as the parent Gaussian") {

@@ -278,6 +278,11 @@ struct DensifyConfig {
   /// exceed it, those with the largest average screen-space gradient grow first (ties: lower
   /// index); the rest wait for the next refinement. Pruning is not affected.
   std::size_t max_gaussians = 0;
+  /// Stop with DensifyLimitError when a refinement would grow the model beyond this many
+  /// Gaussians, before it allocates anything (0 = never). A guard against runaway growth running
+  /// out of memory: unlike max_gaussians it never changes a result, it only ends a run that would
+  /// not fit (`msgs train` sets it from the memory the machine has available).
+  std::size_t stop_gaussians = 0;
 
   // ---- step ranges (integers, scaled by ScheduleScale) ----
   int refine_start = 500;           ///< refine only at step > refine_start
@@ -501,6 +506,22 @@ struct RefineCounts {
 };
 
 /// Outcome of DensityControl::step_post_backward.
+/// Thrown by DensityControl::refine when a refinement would grow the model beyond
+/// DensifyConfig::stop_gaussians: the run stops before it runs out of memory.
+struct DensifyLimitError : std::runtime_error {
+  long long step;
+  std::size_t before, after, limit;
+  DensifyLimitError(long long s, std::size_t n, std::size_t grown, std::size_t lim)
+      : std::runtime_error("densification at step " + std::to_string(s) + " would grow the model from " +
+                           std::to_string(n) + " to " + std::to_string(grown) + " Gaussians, above the limit of " + std::to_string(lim) +
+                           " (`msgs train --stop-gaussians`, by default what fits in memory); the run is stopped. " +
+                           "Runaway growth (the " +
+                           "statistics exceed the growth threshold almost everywhere) usually means colours far " +
+                           "from the images or a schedule too dense for the scene: see README, \"Presets, " +
+                           "reference parity and convergence\". --max-gaussians N caps the growth instead."),
+        step(s), before(n), after(grown), limit(lim) {}
+};
+
 struct DensifyReport {
   bool refined = false;        ///< grow + prune ran at this step
   bool opacity_reset = false;  ///< opacities were reset at this step
@@ -680,6 +701,9 @@ class DensityControl {
       counts.duplicated += dup[i];
       counts.split += split[i];
     }
+    const std::size_t grown_to = n + counts.duplicated + counts.split * std::size_t(cfg_.split_samples - 1);
+    if (cfg_.stop_gaussians > 0 && grown_to > cfg_.stop_gaussians)
+      throw DensifyLimitError(step, n, grown_to, cfg_.stop_gaussians);
 
     // The surgery is planned on row indices first and applied to the model once at the end: one
     // pass over every array instead of one per stage (duplicate, split, prune).

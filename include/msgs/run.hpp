@@ -38,6 +38,9 @@ struct RunConfig {
   std::string geometry_band = "D";
   /// Most Gaussians densification may grow each model to (DensifyConfig::max_gaussians; 0 = no limit).
   std::size_t max_gaussians = 0;
+  /// Stop the run with DensifyLimitError when a refinement would grow a model beyond this many
+  /// Gaussians (DensifyConfig::stop_gaussians; 0 = never). Changes no result.
+  std::size_t stop_gaussians = 0;
   TrainOptions train{};               ///< seed, learning rates, callbacks
   InitConfig init{};                  ///< initialisation from the sparse point cloud
   std::size_t random_init_points = 20000;  ///< used when the dataset has no point cloud
@@ -227,6 +230,7 @@ RunResult run_experiment(const io::Dataset& ds, const RunConfig& cfg, const std:
   validate_run(ds, cfg);
   StrategySpec spec = parse_strategy(cfg.strategy, scale, cfg.densify);
   spec.plan.densify.max_gaussians = cfg.max_gaussians;
+  spec.plan.densify.stop_gaussians = cfg.stop_gaussians;
   RunResult res;
   res.exposure = cfg.train.exposure;
   res.strategy = spec.plan.name;
