@@ -136,6 +136,9 @@ int run_train(const std::vector<std::string>& argv) {
   const long cap = args.integer("max-gaussians", 0);
   if (cap < 0) throw msgs::cli::UsageError("--max-gaussians must be >= 0 (0 = no limit)");
   cfg.max_gaussians = std::size_t(cap);
+  const long stop = args.integer("stop-gaussians", 0);
+  if (stop < 0) throw msgs::cli::UsageError("--stop-gaussians must be >= 0 (0 = never)");
+  cfg.stop_gaussians = std::size_t(stop);
   const long every = args.integer("checkpoint-every", 0);
   if (every < 0) throw msgs::cli::UsageError("--checkpoint-every must be >= 0");
   cfg.train.checkpoint_every = int(every);
@@ -154,22 +157,16 @@ int run_train(const std::vector<std::string>& argv) {
 
   msgs::validate_run(ds, cfg);  // before anything is written: missing bands, no geometry band
   std::vector<std::string> band_ids = cfg.bands.empty() ? ds.bands() : cfg.bands;
-  {  // runaway densification stops with an error before memory runs out
-    int channels = 0;
-    if (msgs::parse_strategy(cfg.strategy).plan.kind == msgs::StrategyKind::Joint) {
-      for (const auto& b : msgs::io::standard_bands()) channels += b.channels;
-    } else {
-      for (const auto& b : msgs::io::standard_bands())
-        if (std::find(band_ids.begin(), band_ids.end(), b.id) != band_ids.end()) channels = std::max(channels, b.channels);
-    }
-    const int K = (int(deg) + 1) * (int(deg) + 1);
-    cfg.stop_gaussians = msgs::cli::stop_gaussians_for(msgs::cli::available_memory_bytes(),
-                                                       msgs::cli::training_bytes_per_gaussian(std::max(channels, 1), K));
-    if (args.has("stop-gaussians")) {
-      const long stop = args.integer("stop-gaussians", 0);
-      if (stop < 0) throw msgs::cli::UsageError("--stop-gaussians must be >= 0 (0 = never)");
-      cfg.stop_gaussians = std::size_t(stop);
-    }
+  // Runaway densification stops with an error before memory runs out (--stop-gaussians, parsed
+  // above, replaces the limit derived from the available memory).
+  if (!args.has("stop-gaussians")) {
+    int channels = 1;  // of the largest model the run trains
+    if (msgs::parse_strategy(cfg.strategy).plan.kind == msgs::StrategyKind::Joint) channels = msgs::io::joint_channels();
+    else
+      for (const auto& id : band_ids)
+        if (const msgs::io::BandInfo* b = msgs::io::find_band(id)) channels = std::max(channels, b->channels);
+    cfg.stop_gaussians = msgs::cli::stop_gaussians_for(
+        msgs::cli::available_memory_bytes(), msgs::cli::training_bytes_per_gaussian(channels, msgs::sh_coeffs_for_degree(int(deg))));
   }
   msgs::SnapshotStore snapshots;  // --view: the models as they train
   const std::unique_ptr<msgs::cli::LiveView> live = msgs::cli::start_live_view(args, ds, snapshots, cfg, band_ids.size());
