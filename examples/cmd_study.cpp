@@ -26,6 +26,7 @@
 #include "commands.hpp"
 #include "data_options.hpp"
 #include "experiment.hpp"
+#include "memory_guard.hpp"
 #include "render_dispatch.hpp"
 #include "report.hpp"
 #include "run_sheets.hpp"
@@ -38,7 +39,7 @@ namespace st = msgs::study;
 constexpr const char* kUsage =
     "usage: msgs study ablation|crosstalk|cost|convergence --data DIR --out DIR [--scale F] [--jobs N]\n"
     "                  [--sh-degree D] [--seed S] [--resume] [--job-file PATH] [--msgs PATH] [--no-plot]\n"
-    "                  [--images NAME] [--eval-every N] [--geometry-band ID]\n"
+    "                  [--images NAME] [--eval-every N] [--geometry-band ID] [--num-downscales N]\n"
     "                  convergence: [--strategies LIST] [--presets LIST] [--eval-every-seconds T]\n"
     "       msgs study collect --out DIR [--no-plot]\n"
     "\n"
@@ -60,6 +61,7 @@ constexpr const char* kUsage =
     "\n"
     MSGS_DATA_OPTIONS_USAGE
     "  --geometry-band ID  geometry band of every run (see `msgs train --help`; default D)\n"
+    "  --num-downscales N  resolution schedule of every run (see `msgs train --help`; default 2)\n"
     "  --scale F       schedule scale of the runs (default 0.01: a 1200-step Joint run)\n"
     "  --jobs N        runs at a time, as threads of this process; with N > 1 each run gets\n"
     "                  max(1, cores / N) OpenMP threads (default 1: one run on every core)\n"
@@ -192,7 +194,8 @@ bool finished(const fs::path& dir) {
 
 int run_study(const std::vector<std::string>& argv) {
   const msgs::cli::Args args(argv, {"data", "images", "eval-every", "geometry-band", "out", "scale", "jobs", "sh-degree", "seed",
-                              "job-file", "msgs", "strategies", "presets", "eval-every-seconds"},
+                              "job-file", "msgs", "strategies", "presets", "eval-every-seconds",
+                              "num-downscales"},
                              {"help", "resume", "no-plot", "quiet"});
   if (args.flag("help") || args.positional().empty()) { std::fputs(kUsage, stdout); return args.flag("help") ? 0 : 2; }
   if (args.positional().size() > 1) throw msgs::cli::UsageError("unexpected argument '" + args.positional()[1] + "'");
@@ -227,8 +230,11 @@ int run_study(const std::vector<std::string>& argv) {
   if (jobs < 1) throw msgs::cli::UsageError("--jobs must be >= 1");
   const fs::path data = fs::absolute(args.require("data"));
   std::vector<std::string> data_args;  // passed on to every run (job lines included)
-  for (const char* k : {"images", "eval-every", "geometry-band"})
+  for (const char* k : {"images", "eval-every", "geometry-band", "num-downscales"})
     if (args.has(k)) { data_args.push_back(std::string("--") + k); data_args.push_back(args.get(k)); }
+  const long num_downscales = args.integer("num-downscales", -1);
+  if (args.has("num-downscales") && (num_downscales < 0 || num_downscales > 8))
+    throw msgs::cli::UsageError("--num-downscales must be 0..8 (0 = full resolution from the first step)");
   const std::string geometry_band = args.get("geometry-band", "D");
 
   std::vector<st::StudyRun> runs;
@@ -285,6 +291,11 @@ int run_study(const std::vector<std::string>& argv) {
           cfg.scale = r.scale;
           cfg.bands = r.bands;
           cfg.geometry_band = geometry_band;
+          cfg.num_downscales = int(num_downscales);
+          // Runaway densification ends the run with an error, not the machine's memory (the
+          // runs at a time share it).
+          cfg.stop_gaussians = msgs::cli::default_stop_gaussians(r.strategy, r.bands.empty() ? ds.bands() : r.bands,
+                                                                 r.sh_degree, int(jobs));
           msgs::apply_preset(msgs::parse_preset(r.preset), cfg.train, r.scale);
           cfg.train.curve.every_seconds = r.curve_seconds;
           cfg.train.seed = r.seed;

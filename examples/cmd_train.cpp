@@ -159,15 +159,7 @@ int run_train(const std::vector<std::string>& argv) {
   std::vector<std::string> band_ids = cfg.bands.empty() ? ds.bands() : cfg.bands;
   // Runaway densification stops with an error before memory runs out (--stop-gaussians, parsed
   // above, replaces the limit derived from the available memory).
-  if (!args.has("stop-gaussians")) {
-    int channels = 1;  // of the largest model the run trains
-    if (msgs::parse_strategy(cfg.strategy).plan.kind == msgs::StrategyKind::Joint) channels = msgs::io::joint_channels();
-    else
-      for (const auto& id : band_ids)
-        if (const msgs::io::BandInfo* b = msgs::io::find_band(id)) channels = std::max(channels, b->channels);
-    cfg.stop_gaussians = msgs::cli::stop_gaussians_for(
-        msgs::cli::available_memory_bytes(), msgs::cli::training_bytes_per_gaussian(channels, msgs::sh_coeffs_for_degree(int(deg))));
-  }
+  if (!args.has("stop-gaussians")) cfg.stop_gaussians = msgs::cli::default_stop_gaussians(cfg.strategy, band_ids, int(deg));
   msgs::SnapshotStore snapshots;  // --view: the models as they train
   const std::unique_ptr<msgs::cli::LiveView> live = msgs::cli::start_live_view(args, ds, snapshots, cfg, band_ids.size());
   const bool quiet = args.flag("quiet");

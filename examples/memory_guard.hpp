@@ -4,11 +4,17 @@
 // The limit only ends runs that would not fit; it never changes a result.
 #pragma once
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <vector>
+
+#include <msgs/io/bands.hpp>
+#include <msgs/gaussian.hpp>
+#include <msgs/strategy.hpp>
 
 namespace msgs::cli {
 
@@ -38,6 +44,20 @@ inline std::size_t training_bytes_per_gaussian(int channels, int sh_coeffs) {
 inline std::size_t stop_gaussians_for(std::uint64_t available_bytes, std::size_t bytes_per_gaussian) {
   if (available_bytes == 0 || bytes_per_gaussian == 0) return 0;
   return std::size_t(available_bytes / 4 * 3 / bytes_per_gaussian);
+}
+
+/// The stop limit of a run of `strategy` on `band_ids` at SH degree `sh_degree` when `share` runs
+/// train at once: the largest model it trains (Joint's 7 channels, else the widest band) against
+/// 1/share of the memory available now.
+inline std::size_t default_stop_gaussians(const std::string& strategy, const std::vector<std::string>& band_ids,
+                                          int sh_degree, int share = 1) {
+  int channels = 1;
+  if (parse_strategy(strategy).plan.kind == StrategyKind::Joint) channels = io::joint_channels();
+  else
+    for (const auto& id : band_ids)
+      if (const io::BandInfo* b = io::find_band(id)) channels = std::max(channels, b->channels);
+  return stop_gaussians_for(available_memory_bytes() / std::uint64_t(std::max(share, 1)),
+                            training_bytes_per_gaussian(channels, sh_coeffs_for_degree(sh_degree)));
 }
 
 }  // namespace msgs::cli

@@ -450,7 +450,8 @@ inline ParsedJob parse_job_line(std::string_view line) {
       else if (k == "--seed") j.run.seed = std::stoull(v);
       else if (k == "--preset") { (void)parse_preset(v); j.run.preset = v; }
       else if (k == "--eval-every-seconds") j.run.curve_seconds = std::stod(v);
-      else if (k == "--images" || k == "--eval-every" || k == "--geometry-band") { j.data_args.push_back(k); j.data_args.push_back(v); }
+      else if (k == "--images" || k == "--eval-every" || k == "--geometry-band" ||
+               k == "--num-downscales") { j.data_args.push_back(k); j.data_args.push_back(v); }
       else if (k == "--bands") {
         j.run.bands.clear();
         std::string cur;

@@ -31,6 +31,8 @@ namespace msgs::cli {
     "                    not see it, as torch's Adam) or sparse (gradients, Adam and the scale\n" \
     "                    regulariser only for the Gaussians the view saw: faster, a different\n" \
     "                    optimisation, which trains worse at CPU schedules: see README)\n" \
+    "  --num-downscales N  training images start at 1/2^N of their resolution and double every 3000\n" \
+    "                    steps (scaled; default 2, splatfacto's); 0 = full resolution throughout\n" \
     "  --eval-every-seconds T  anytime evaluation: every T seconds of training, PSNR / SSIM per band\n" \
     "                    on a fixed subset of the eval split (its time is kept off the training\n" \
     "                    clock); result.json gets the curve, and curve.csv is written\n" \
@@ -41,7 +43,8 @@ namespace msgs::cli {
 /// The option names of MSGS_TRAIN_OPTIONS_USAGE that take a value, and the flags.
 inline const std::vector<std::string>& train_option_values() {
   static const std::vector<std::string> v = {"preset", "ssim", "shuffle", "lr-sh-dc", "adam",
-                                             "eval-every-seconds", "eval-every-steps", "eval-images"};
+                                             "eval-every-seconds", "eval-every-steps", "eval-images",
+                                             "num-downscales"};
   return v;
 }
 inline const std::vector<std::string>& train_option_flags() {
@@ -86,6 +89,11 @@ inline void apply_train_options(const Args& args, RunConfig& cfg) {
   const long images = args.integer("eval-images", 4);
   if (images < 0 || images > 100000) throw UsageError("--eval-images must be between 0 (all) and 100000");
   cfg.train.curve.images = int(images);
+  if (args.has("num-downscales")) {
+    const long d = args.integer("num-downscales", 2);
+    if (d < 0 || d > 8) throw UsageError("--num-downscales must be 0..8 (0 = full resolution from the first step)");
+    cfg.num_downscales = int(d);
+  }
 }
 
 /// The training options of `args` as command-line words, to pass on to a run (job lines).

@@ -337,6 +337,10 @@ TEST_CASE("job lines: a POSIX shell splits them into the arguments, and they par
   CHECK_THROWS_AS(parse_job_line("msgs train --data 'x"), std::invalid_argument);
   CHECK_THROWS_AS(parse_job_line("msgs train --data x --out y --strategy joint+bogus"), std::invalid_argument);
   CHECK_THROWS_AS(parse_job_line("msgs render --data x"), std::invalid_argument);
+  // The options every run shares (msgs study --images, --eval-every, --geometry-band,
+  // --num-downscales) come back as they went in.
+  const std::vector<std::string> shared = {"--images", "images_2", "--num-downscales", "0"};
+  CHECK(parse_job_line(job_line(r, "/opt/msgs", data, out, shared)).data_args == shared);
 }
 
 TEST_CASE("convergence: strategies x presets with the anytime evaluation, carried through job lines") {

@@ -207,6 +207,20 @@ TEST_CASE("Joint: one 7-channel model over every band") {
   CHECK(seen.size() == 5);
 }
 
+TEST_CASE("num_downscales: -1 keeps splatfacto's resolution schedule, 0 trains at full resolution") {
+  RunConfig cfg = config("joint", 0.001);
+  const RunResult def = run_experiment<kDeg>(tiny(), cfg);
+  CHECK(def.plan.schedule.num_downscales == 2);
+  CHECK(def.plan.schedule.downscale(0) == 4);
+  cfg.num_downscales = 0;
+  const RunResult full = run_experiment<kDeg>(tiny(), cfg);
+  CHECK(full.plan.schedule.num_downscales == 0);
+  CHECK(full.plan.schedule.downscale(0) == 1);
+  CHECK(full.steps == def.steps);
+  // Different training images from the first step on: a different model.
+  CHECK(BandMetrics::mean(full.metrics[0].psnr) != BandMetrics::mean(def.metrics[0].psnr));
+}
+
 TEST_CASE("Geometry band: strategies that need one refuse a capture without it before training") {
   // A capture without the RGB camera: only narrow bands.
   for (const char* s : {"split", "joint+specdelay+msad", "joint+sig", "split+extadc"}) {

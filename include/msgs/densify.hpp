@@ -516,8 +516,10 @@ struct DensifyLimitError : std::runtime_error {
                            std::to_string(n) + " to " + std::to_string(grown) + " Gaussians, above the limit of " + std::to_string(lim) +
                            " (`msgs train --stop-gaussians`, by default what fits in memory); the run is stopped. " +
                            "Runaway growth (the " +
-                           "statistics exceed the growth threshold almost everywhere) usually means colours far " +
-                           "from the images or a schedule too dense for the scene: see README, \"Presets, " +
+                           "statistics exceed the growth threshold almost everywhere) usually means training images " +
+                           "so small that every Gaussian covers a large part of one (the resolution schedule starts " +
+                           "at a quarter of their size: `--num-downscales 0` trains at full size), colours far " +
+                           "from the images, or a schedule too dense for the scene: see README, \"Presets, " +
                            "reference parity and convergence\". --max-gaussians N caps the growth instead."),
         step(s), before(n), after(grown), limit(lim) {}
 };

@@ -41,6 +41,10 @@ struct RunConfig {
   /// Stop the run with DensifyLimitError when a refinement would grow a model beyond this many
   /// Gaussians (DensifyConfig::stop_gaussians; 0 = never). Changes no result.
   std::size_t stop_gaussians = 0;
+  /// Resolution schedule: training images start downscaled by 2^num_downscales and double in
+  /// resolution every `resolution_every` steps (TrainSchedule); -1 keeps the strategy's
+  /// (splatfacto's 2, a quarter of the resolution at first), 0 trains at full resolution throughout.
+  int num_downscales = -1;
   TrainOptions train{};               ///< seed, learning rates, callbacks
   InitConfig init{};                  ///< initialisation from the sparse point cloud
   std::size_t random_init_points = 20000;  ///< used when the dataset has no point cloud
@@ -231,6 +235,7 @@ RunResult run_experiment(const io::Dataset& ds, const RunConfig& cfg, const std:
   StrategySpec spec = parse_strategy(cfg.strategy, scale, cfg.densify);
   spec.plan.densify.max_gaussians = cfg.max_gaussians;
   spec.plan.densify.stop_gaussians = cfg.stop_gaussians;
+  if (cfg.num_downscales >= 0) spec.plan.schedule.num_downscales = cfg.num_downscales;
   RunResult res;
   res.exposure = cfg.train.exposure;
   res.strategy = spec.plan.name;
