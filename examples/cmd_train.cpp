@@ -31,6 +31,7 @@ constexpr const char* kUsage =
     "                  [--geometry-band ID]\n"
     "                  [--exposure [--lr-exposure X]] [--preset reference|fast] [--ssim valid|same]\n"
     "                  [--no-clamp] [--shuffle every-pass|once] [--adam sparse|dense] [--lr-sh-dc X]\n"
+    "                  [--spectral-init on|off]\n"
     "                  [--eval-every-seconds T] [--eval-every-steps N] [--eval-images K]\n"
     "                  [--view [PORT] [--host H]]\n"
     "\n"

@@ -27,6 +27,9 @@ namespace msgs::cli {
     "  --shuffle S       every-pass (reference: each band's images reshuffled when used up) or once\n" \
     "  --lr-sh-dc X      Adam learning rate of the SH DC (base colour) coefficients (reference\n" \
     "                    0.0025; the fast preset scales it with --scale)\n" \
+    "  --spectral-init S on (the fast preset: narrow bands start from the geometry band's\n" \
+    "                    luminance at their own brightness when they start training) or off\n" \
+    "                    (reference: random colours)\n" \
     "  --adam MODE       dense (reference: every Gaussian each step, zero gradient where the view did\n" \
     "                    not see it, as torch's Adam) or sparse (gradients, Adam and the scale\n" \
     "                    regulariser only for the Gaussians the view saw: faster, a different\n" \
@@ -42,7 +45,7 @@ namespace msgs::cli {
 
 /// The option names of MSGS_TRAIN_OPTIONS_USAGE that take a value, and the flags.
 inline const std::vector<std::string>& train_option_values() {
-  static const std::vector<std::string> v = {"preset", "ssim", "shuffle", "lr-sh-dc", "adam",
+  static const std::vector<std::string> v = {"preset", "ssim", "shuffle", "lr-sh-dc", "spectral-init", "adam",
                                              "eval-every-seconds", "eval-every-steps", "eval-images",
                                              "num-downscales"};
   return v;
@@ -75,6 +78,11 @@ inline void apply_train_options(const Args& args, RunConfig& cfg) {
   cfg.train.adam.lr_sh_dc = args.number("lr-sh-dc", cfg.train.adam.lr_sh_dc);
   if (!(std::isfinite(cfg.train.adam.lr_sh_dc) && cfg.train.adam.lr_sh_dc > 0))
     throw UsageError("--lr-sh-dc must be a finite number > 0");
+  if (args.has("spectral-init")) {
+    const std::string s = args.get("spectral-init");
+    if (s != "on" && s != "off") throw UsageError("--spectral-init must be on or off, got '" + s + "'");
+    cfg.train.spectral_colour_init = s == "on";
+  }
   if (args.has("adam")) {
     const std::string m = args.get("adam");
     if (m != "sparse" && m != "dense") throw UsageError("--adam must be sparse or dense, got '" + m + "'");

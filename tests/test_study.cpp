@@ -24,6 +24,7 @@
 #include <msgs/synth.hpp>
 
 #include "../examples/report.hpp"  // the result.json writer of `msgs train`, which collect must read
+#include "../examples/train_options.hpp"  // the preset and switches `msgs train` and its job lines take
 
 using namespace msgs;
 using namespace msgs::study;
@@ -488,4 +489,29 @@ TEST_CASE("end to end: two tiny cross-talk runs trained, written as `msgs train`
   CHECK(rows[1].psnr[0] == doctest::Approx((rows[1].psnr[1] + rows[1].psnr[5]) / 2));
   const auto csv = lines_of(summary_csv(rows));
   CHECK(csv.size() == 3);
+}
+
+TEST_CASE("train options: each departure of the fast preset can be switched on its own") {
+  const auto config_of = [](const std::vector<std::string>& argv) {
+    RunConfig cfg;
+    cfg.scale = 0.2;
+    cli::apply_train_options(cli::Args(argv, cli::train_option_values(), cli::train_option_flags()), cfg);
+    return cfg;
+  };
+  const RunConfig ref = config_of({});
+  CHECK_FALSE(ref.train.spectral_colour_init);
+  CHECK(ref.train.adam.lr_sh_dc == doctest::Approx(0.0025));
+  const RunConfig fast = config_of({"--preset", "fast"});
+  CHECK(fast.train.spectral_colour_init);
+  CHECK(fast.train.adam.lr_sh_dc == doctest::Approx(fast_lr_sh_dc(0.2)));
+  CHECK(fast.train.adam.lr_sh_dc > 0.0035);
+  // The fast preset less one departure: spectral-init alone, then colour-lr alone.
+  const RunConfig init_only = config_of({"--preset", "fast", "--lr-sh-dc", "0.0025"});
+  CHECK(init_only.train.spectral_colour_init);
+  CHECK(init_only.train.adam.lr_sh_dc == doctest::Approx(0.0025));
+  const RunConfig lr_only = config_of({"--preset", "fast", "--spectral-init", "off"});
+  CHECK_FALSE(lr_only.train.spectral_colour_init);
+  CHECK(lr_only.train.adam.lr_sh_dc == doctest::Approx(fast.train.adam.lr_sh_dc));
+  CHECK(config_of({"--spectral-init", "on"}).train.spectral_colour_init);
+  CHECK_THROWS_AS(config_of({"--spectral-init", "yes"}), cli::UsageError);
 }
