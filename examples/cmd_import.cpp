@@ -124,8 +124,24 @@ double run_colmap(const std::string& colmap, const std::string& stage, std::vect
       std::fclose(f);
     }
   }
-  const int rc = msgs::cli::run_process(args, log, log);
+  // A COLMAP run that uses no CPU for a minute is deadlocked (COLMAP 3.8's feature extractor
+  // sometimes is, at random): kill it and run the stage again, once.
+  constexpr double kIdleLimit = 60;
+  int rc = msgs::cli::run_process(args, log, log, kIdleLimit);
+  if (rc == msgs::cli::kProcessHung) {
+    std::printf(" no progress for %.0f s, killed; again ...", kIdleLimit);
+    std::fflush(stdout);
+    rc = msgs::cli::run_process(args, log, log, kIdleLimit);
+  }
   const double s = since(t);
+  if (rc == msgs::cli::kProcessHung) {
+    std::printf(" no progress again\n");
+    std::fflush(stdout);
+    throw msgs::io::IoError(cat("colmap ", stage, " used no CPU time for ", kIdleLimit,
+                                " s, twice, and was stopped (a deadlocked COLMAP; run msgs import again, or "
+                                "update COLMAP); last lines of its log:\n",
+                                msgs::cli::tail_lines(log, 25)));
+  }
   if (rc != 0) {
     std::printf(" failed (exit %d) after %.1f s\n", rc, s);
     std::fflush(stdout);

@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "fixtures.hpp"
+#include "../examples/subprocess.hpp"  // the tool's way of running colmap and exiv2
 
 namespace fs = std::filesystem;
 using Json = nlohmann::json;
@@ -240,4 +241,16 @@ TEST_CASE("msgs import: COLMAP failure leaves no output and no temporary folder"
   CHECK_MESSAGE((log.find("mapper") != std::string::npos || log.find("did not register") != std::string::npos), log);
   CHECK(!fs::exists(dir / "ds"));
   CHECK(!leftovers(dir, "ds"));
+}
+
+TEST_CASE("run_process: a child that uses no CPU time is stopped; a busy one runs to its end") {
+  const fs::path log = msgs::testing::scratch_dir("import") / "idle.log";
+  const auto t0 = std::chrono::steady_clock::now();
+  CHECK(msgs::cli::run_process({"sleep", "30"}, log, log, 0.5) == msgs::cli::kProcessHung);
+  CHECK(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() < 10);
+  // A shell loop busy for longer than the limit keeps its CPU time rising.
+  CHECK(msgs::cli::run_process({"sh", "-c", "i=0; while [ $i -lt 600000 ]; do i=$((i+1)); done; exit 3"}, log, log, 0.25) == 3);
+  CHECK(msgs::cli::run_process({"sh", "-c", "exit 5"}, log, log) == 5);  // no limit: as before
+  CHECK(msgs::cli::process_cpu_seconds(::getpid()) >= 0);
+  CHECK(msgs::cli::process_cpu_seconds(-1) == -1);
 }
