@@ -24,7 +24,7 @@
 #include <msgs/synth.hpp>
 
 #include "../examples/report.hpp"  // the result.json writer of `msgs train`, which collect must read
-#include "../examples/train_options.hpp"  // the preset and switches `msgs train` and its job lines take
+#include "../examples/train_options.hpp"  // the preset and the switches `msgs train` takes
 
 using namespace msgs;
 using namespace msgs::study;
