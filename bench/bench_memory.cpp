@@ -67,7 +67,7 @@ void BM_TrainStepMemory(benchmark::State& state) {
   const Camera<float> cam = bench::family_camera<float>(spec);
   const Image<float> gt = bench::family_image_grad<float>(spec, count);  // a [0, 1) target image
 
-  constexpr RasterOptions kTrainOptions{.absgrad = true};  // = msgs::kTrainRaster
+  constexpr RasterOptions kTrainOptions{.absgrad = true, .single_precision = true};  // = msgs::kTrainRaster
   Rasterizer<G, float, kTrainOptions> raster;
   Gradients<G, float> grads;
   Image<float> d_image;

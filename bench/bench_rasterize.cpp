@@ -94,12 +94,13 @@ void bm_backward(benchmark::State& st, int size, int threads, RenderSettings<flo
   set_rates(st, r.fragments(), m.size());
 }
 
-/// The projection stage alone (geometry only): kProjLanes Gaussians at a time as the rasteriser
-/// runs it (detail::project_lanes), or with `scalar` one at a time (project_fwd), for comparison.
+/// The projection stage alone (geometry only): a vector of Gaussians at a time as the rasteriser
+/// runs it (detail::project_lanes; D = detail::ProjVec in double, detail::ProjVecF in single
+/// precision), or with `scalar` one at a time (project_fwd, double), for comparison.
+template <class D>
 void bm_project(benchmark::State& st, int size, int threads, bool scalar) {
   using G = Gaussian<1, 0>;
-  using D = detail::ProjVec;
-  constexpr int L = detail::kProjLanes;
+  constexpr int L = detail::Lanes<D>::kCount;
   omp_set_num_threads(threads);
   const SceneSpec spec = spec_of(size);
   const GaussianModel<G, float>& m = model_for<G>(size);
@@ -164,12 +165,16 @@ int main(int argc, char** argv) {
   const int sizes = (large && std::string(large) != "0") ? 3 : 2;
   for (int size = 0; size < sizes; ++size) {
     for (int threads : {1, 2})
-      for (bool scalar : {false, true})
-        tune(benchmark::RegisterBenchmark((std::string(scalar ? "project_scalar/" : "project/") + kSizes[size].name +
-                                           "/threads:" + std::to_string(threads))
-                                              .c_str(),
-                                          [=](benchmark::State& st) { bm_project(st, size, threads, scalar); }),
+      for (const char* mode : {"project", "project_single", "project_scalar"}) {
+        const std::string name = std::string(mode) + "/" + kSizes[size].name + "/threads:" + std::to_string(threads);
+        const bool single = std::string(mode) == "project_single", scalar = std::string(mode) == "project_scalar";
+        tune(benchmark::RegisterBenchmark(name.c_str(),
+                                          [=](benchmark::State& st) {
+                                            if (single) bm_project<detail::ProjVecF>(st, size, threads, false);
+                                            else bm_project<detail::ProjVec>(st, size, threads, scalar);
+                                          }),
              size);
+      }
     for (int threads : {1, 2}) {
       register_type<Gaussian<1, 0>>("B1_SH0", size, threads);
       register_type<Gaussian<1, 3>>("B1_SH3", size, threads);

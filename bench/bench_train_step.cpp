@@ -139,7 +139,7 @@ double triad_gbps(int threads) {
 
 /// The trainer's rasteriser options, msgs::kTrainRaster in train.hpp (absgrad on: MSAD reads it).
 /// Repeated here, as bench_memory does, so this benchmark does not pull in the trainer and its I/O.
-constexpr RasterOptions kStepRaster{.absgrad = true};
+constexpr RasterOptions kStepRaster{.absgrad = true, .single_precision = true};
 
 /// One training step of a model of type G rendering channels [first, first + count). Every call
 /// into the library a step makes is in this struct (constructor, step, touched), so that an API

@@ -1,6 +1,10 @@
 // tests/test_rasterize_hard_cases.cpp
 // Numerically hard inputs (REFERENCE §7): degenerate quaternions, extreme scales and opacities, the
 // near plane, far off-screen splats, needles, NaN/Inf parameters, empty scenes, tiny images, crowded tiles.
+// Built twice: as test_rasterize_hard_cases with the double-precision projection, and with
+// MSGS_TEST_SINGLE_PRECISION as test_rasterize_hard_cases_single with the single-precision one (whose
+// hard Gaussians go to double precision); the finite-difference checks always differentiate the
+// double-precision rasteriser.
 #include <doctest/doctest.h>
 
 #include <msgs/rasterize.hpp>
@@ -18,7 +22,19 @@ using namespace msgs::testing;
 
 namespace {
 
-constexpr RasterOptions kDepth{.depth = true, .antialiased = false, .absgrad = true};
+#ifdef MSGS_TEST_SINGLE_PRECISION
+constexpr bool kSingle = true;
+#else
+constexpr bool kSingle = false;
+#endif
+constexpr RasterOptions kDepth{.depth = true, .antialiased = false, .absgrad = true, .single_precision = kSingle};
+constexpr RasterOptions kDepthDouble{.depth = true, .antialiased = false, .absgrad = true};
+
+/// Tolerance against the reference: `f` for float models or a single-precision projection, else `d`.
+template <class S>
+constexpr double ref_tol(double f, double d) {
+  return std::is_same_v<S, float> || kSingle ? f : d;
+}
 
 template <class S>
 Image<S> weights(int w, int h, int c, std::uint64_t seed) {
@@ -142,7 +158,7 @@ void check_reference(const GaussianModel<G, S>& m, const Camera<S>& cam, double 
 
 /// Central differences (double) for every parameter of Gaussian `i`, except those `skip` names
 /// (parameter index in [0, G::params): mean 0-2, log-scale 3-5, quat 6-9, opacity 10, SH 11..).
-template <class G, RasterOptions Opt = kDepth>
+template <class G, RasterOptions Opt = kDepthDouble>
 void fd_check_gaussian(GaussianModel<G, double> m, const Camera<double>& cam, std::size_t i,
                        const std::vector<int>& skip = {}, double h = 1e-6) {
   Rasterizer<G, double, Opt> r;
@@ -220,7 +236,7 @@ TEST_CASE_TEMPLATE("zero and near-zero quaternions", S, float, double) {
   check_culled(m, cam, {2, 5, 7});
   // Small but valid: rendered as its direction.
   for (int k = 0; k < 4; ++k) m.quats[4 * 9 + k] = S(1e-5 * (k + 1));
-  check_reference(m, cam, std::is_same_v<S, float> ? 1e-5 : 1e-9);
+  check_reference(m, cam, ref_tol<S>(1e-5, 1e-9));
   if constexpr (std::is_same_v<S, double>) {
     for (int k = 0; k < 4; ++k) m.quats[4 * 9 + k] = 1e-3 * (k + 1);
     fd_check_gaussian(m, cam, 9, {}, 1e-9);
@@ -232,7 +248,7 @@ TEST_CASE_TEMPLATE("extreme log-scales", S, float, double) {
   GaussianModel<G31, S> m = background_scene<G31, S>(cam, 10, 2);
   set_gaussian(m, 1, 0.1, 0.05, 3.0, -30.0, 0.5, 0.6);  // a point: the 0.3 px^2 filter alone
   set_gaussian(m, 4, -0.2, 0.1, 4.0, 30.0, -2.0, 0.4);  // covers everything, almost flat
-  check_reference(m, cam, std::is_same_v<S, float> ? 1e-5 : 1e-9);
+  check_reference(m, cam, ref_tol<S>(1e-5, 1e-9));
   if constexpr (std::is_same_v<S, double>) {
     fd_check_gaussian(m, cam, 1);
     fd_check_gaussian(m, cam, 4);
@@ -249,7 +265,7 @@ TEST_CASE_TEMPLATE("extreme opacity logits", S, float, double) {
   GaussianModel<G31, S> m = background_scene<G31, S>(cam, 10, 3);
   set_gaussian(m, 3, 0.0, 0.0, 2.5, std::log(0.2), 30.0, 0.7);  // alpha clamped at 0.99 in the middle
   set_gaussian(m, 6, 0.2, 0.0, 2.0, std::log(0.2), -30.0, 0.7); // opacity 1e-13: culled
-  check_reference(m, cam, std::is_same_v<S, float> ? 1e-5 : 1e-9);
+  check_reference(m, cam, ref_tol<S>(1e-5, 1e-9));
   check_culled(m, cam, {6});
   if constexpr (std::is_same_v<S, double>) fd_check_gaussian(m, cam, 3);
 }
@@ -259,7 +275,7 @@ TEST_CASE_TEMPLATE("16 coincident opaque Gaussians (ties broken by index)", S, f
   GaussianModel<G31, S> m(16);
   for (std::size_t i = 0; i < 16; ++i)
     set_gaussian(m, i, 0.02, -0.01, 3.0, std::log(0.3), std::log(0.85 / 0.15), 0.05 * double(i) + 0.1);
-  check_reference(m, cam, std::is_same_v<S, float> ? 1e-5 : 1e-9);
+  check_reference(m, cam, ref_tol<S>(1e-5, 1e-9));
   if constexpr (std::is_same_v<S, double>) {
     // Moving a mean along z breaks the tie (a discontinuity): skip parameter 2.
     fd_check_gaussian(m, cam, 0, {2});
@@ -281,7 +297,7 @@ TEST_CASE_TEMPLATE("on and around the near plane", S, float, double) {
   set_gaussian(m, 1, 0.015, -0.003, near * 1.5, std::log(0.005), 0.0, 0.5);  // off axis, clamp active
   Rasterizer<G31, S, kDepth> r;
   render_finite(r, m, cam);
-  check_reference(m, cam, std::is_same_v<S, float> ? 1e-5 : 1e-9);
+  check_reference(m, cam, ref_tol<S>(1e-5, 1e-9));
   if constexpr (std::is_same_v<S, double>) {
     fd_check_gaussian(m, cam, 0, {}, 1e-8);
     fd_check_gaussian(m, cam, 1, {}, 1e-8);
@@ -295,7 +311,7 @@ TEST_CASE_TEMPLATE("straddling the border with a principal point far outside the
   sp.n = 120;
   sp.margin_px = 20;
   const GaussianModel<G31, S> m = random_scene<G31, S>(cam, sp, 5);
-  check_reference(m, cam, std::is_same_v<S, float> ? 1e-5 : 1e-9);
+  check_reference(m, cam, ref_tol<S>(1e-5, 1e-9));
   if constexpr (std::is_same_v<S, double>) {
     // Find a Gaussian whose centre is just outside the left border and FD-check it.
     const ReferenceResult<double> ref = reference_render<double>(m, cam, ReferenceSettings{});
@@ -334,7 +350,7 @@ TEST_CASE_TEMPLATE("needles with a scale ratio of 1e6", S, float, double) {
   Rasterizer<G31, S, kDepth> r;
   render_finite(r, m, cam);
   // Float blends with float conics: along a long needle sigma loses a few digits to cancellation.
-  check_reference(m, cam, std::is_same_v<S, float> ? 1e-3 : 1e-9);
+  check_reference(m, cam, ref_tol<S>(1e-3, 1e-9));
   if constexpr (std::is_same_v<S, double>) fd_check_gaussian(m, cam, 2, {}, 1e-7);
 }
 
@@ -390,7 +406,7 @@ TEST_CASE_TEMPLATE("a 1x1 image", S, float, double) {
   for (std::size_t i = 0; i < 6; ++i)
     set_gaussian(m, i, -0.2 + 0.07 * double(i), 0.1 - 0.05 * double(i), 1.0 + 0.3 * double(i), std::log(0.1 + 0.05 * double(i)),
                  0.3 * double(i) - 0.8, 0.2 + 0.1 * double(i));
-  check_reference(m, cam, std::is_same_v<S, float> ? 1e-5 : 1e-9);
+  check_reference(m, cam, ref_tol<S>(1e-5, 1e-9));
   if constexpr (std::is_same_v<S, double>) fd_check_gaussian(m, cam, 2);
 }
 

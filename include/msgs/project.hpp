@@ -32,6 +32,23 @@ struct ProjectConstants {
   static constexpr double kMinCompensation = 0.005; ///< floor of the antialiasing opacity factor
 };
 
+/// Where the single-precision projection (RasterOptions::single_precision) hands a Gaussian to the
+/// double-precision one, which takes every input: any |log-scale| above kLogScale (its squared
+/// scale would leave float's range), any |mean component| above kMean or |quaternion component|
+/// above kQuat (non-finite ones included), a camera-space depth |z| below (2 max|mean| + max|t|) /
+/// kDepthRatio (the rounding of the camera transform, about 2^-24 of |mean| + |t|, would no
+/// longer be small against z: at most 1/128 of a focal length in pixels at kDepthRatio = 128),
+/// and a screen covariance above kCov2d px^2 (sigma 10^4 px; a larger one would overflow the
+/// backward's squared determinants). Each test reads only the Gaussian's own parameters and the
+/// camera, so a Gaussian takes the same path in the forward and in the backward.
+struct ProjectPrecisionLimits {
+  static constexpr double kLogScale = 20.0;
+  static constexpr double kMean = 1e7;
+  static constexpr double kQuat = 1e15;
+  static constexpr double kDepthRatio = 128.0;
+  static constexpr double kCov2d = 1e8;
+};
+
 /// Camera in the double form the projection uses: world-to-camera rotation and translation as
 /// plain arrays, and the camera centre in world space (for view directions).
 struct ProjectCamera {
@@ -106,6 +123,9 @@ namespace detail {
 /// Doubles per projection vector.
 inline constexpr int kProjLanes = kVectorBytes / int(sizeof(double));
 typedef double ProjVec __attribute__((vector_size(kProjLanes * sizeof(double))));
+/// Floats per single-precision projection vector (twice as many Gaussians per instruction).
+inline constexpr int kProjLanesF = kVectorBytes / int(sizeof(float));
+typedef float ProjVecF __attribute__((vector_size(kProjLanesF * sizeof(float))));
 
 /// Masks, selects and the elementary functions for lane type D (see above).
 template <class D>
@@ -113,7 +133,9 @@ struct Lanes;
 
 template <>
 struct Lanes<double> {
+  using T = double;  // the scalar of a lane
   using M = bool;
+  static constexpr int kCount = 1;
   static double splat(double x) { return x; }
   static double sel(bool m, double a, double b) { return m ? a : b; }
   static bool any(bool m) { return m; }
@@ -122,7 +144,20 @@ struct Lanes<double> {
 };
 
 template <>
+struct Lanes<float> {
+  using T = float;
+  using M = bool;
+  static constexpr int kCount = 1;
+  static float splat(double x) { return float(x); }
+  static float sel(bool m, float a, float b) { return m ? a : b; }
+  static bool any(bool m) { return m; }
+  static bool not_(bool m) { return !m; }
+  static float sqrt(float x) { return std::sqrt(x); }
+};
+
+template <>
 struct Lanes<ProjVec> {
+  using T = double;
   using M = decltype(ProjVec{} < ProjVec{});  // the compiler's comparison type (long or long long lanes)
   static constexpr int kCount = kProjLanes;
   static ProjVec splat(double x) { return x - ProjVec{}; }
@@ -147,6 +182,53 @@ struct Lanes<ProjVec> {
   }
 };
 
+template <>
+struct Lanes<ProjVecF> {
+  using T = float;
+  using M = decltype(ProjVecF{} < ProjVecF{});  // 32-bit integer lanes
+  static constexpr int kCount = kProjLanesF;
+  static ProjVecF splat(double x) { return float(x) - ProjVecF{}; }
+  static ProjVecF sel(const M& m, const ProjVecF& a, const ProjVecF& b) { return m ? a : b; }
+  static bool any(const M& m) { return lane_bits(m) != 0; }
+  static M not_(const M& m) { return ~m; }
+  static ProjVecF sqrt(const ProjVecF& x) {
+#if defined(__AVX512F__)
+    const __m512 v = std::bit_cast<__m512>(x);
+    return std::bit_cast<ProjVecF>(_mm512_mask_sqrt_ps(v, __mmask16(0xffff), v));
+#elif defined(__AVX__)
+    return std::bit_cast<ProjVecF>(_mm256_sqrt_ps(std::bit_cast<__m256>(x)));
+#elif defined(__SSE2__)
+    return std::bit_cast<ProjVecF>(_mm_sqrt_ps(std::bit_cast<__m128>(x)));
+#else
+    ProjVecF r = x;
+    for (int i = 0; i < kCount; ++i) r[i] = std::sqrt(x[i]);
+    return r;
+#endif
+  }
+};
+
+/// Is lane type D single precision (the fast projection, see project_lanes)?
+template <class D>
+inline constexpr bool kSingleLanes = std::is_same_v<typename Lanes<D>::T, float>;
+
+/// Lane l of x (x itself for a one-lane type), and whether lane l of mask m is set.
+template <class D>
+inline typename Lanes<D>::T lane(const D& x, int l) {
+  if constexpr (std::is_arithmetic_v<D>) return (void)l, x;
+  else return x[l];
+}
+template <class M>
+inline bool lane_on(const M& m, int l) {
+  if constexpr (std::is_same_v<M, bool>) return (void)l, m;
+  else return m[l] != 0;
+}
+/// Set lane l of x to v (x itself for a one-lane type).
+template <class D>
+inline void set_lane(D& x, int l, typename Lanes<D>::T v) {
+  if constexpr (std::is_arithmetic_v<D>) (void)l, x = v;
+  else x[l] = v;
+}
+
 /// Logical and / or of masks: && and || for one lane, & and | for vector masks.
 template <class M>
 inline M mand(const M& a, const M& b) {
@@ -169,7 +251,7 @@ inline D lmin(const D& a, const D& b) { return Lanes<D>::sel(b < a, b, a); }
 template <class D>
 inline D lmax(const D& a, const D& b) { return Lanes<D>::sel(a < b, b, a); }
 template <class D>
-inline D lclamp(const D& v, double lo, double hi) {
+inline D lclamp(const D& v, double lo, double hi) {  // lo, hi exact in D's scalar
   using L = Lanes<D>;
   return L::sel(v < L::splat(lo), L::splat(lo), L::sel(L::splat(hi) < v, L::splat(hi), v));
 }
@@ -192,6 +274,66 @@ struct LaneInts<ProjVec> {
   static I from_integral(const ProjVec& x) { return __builtin_convertvector(x, I); }
   static I one_where(const I& m) { return -m; }  // true lanes are -1
 };
+/// 32-bit integer lanes of the single-precision types.
+template <>
+struct LaneInts<float> {
+  using I = std::int32_t;
+  static I from_integral(float x) { return I(x); }
+  static I one_where(bool m) { return m ? 1 : 0; }
+};
+template <>
+struct LaneInts<ProjVecF> {
+  using I = Lanes<ProjVecF>::M;  // signed 32-bit lanes
+  static I from_integral(const ProjVecF& x) { return __builtin_convertvector(x, I); }
+  static I one_where(const I& m) { return -m; }
+};
+
+/// e^x in single precision, within 1 ulp or so (tested against std::exp): as lexp below with
+/// Cephes' two-part ln 2 (n ln2_hi exact for |n| < 2^15) and the Taylor polynomial of degree 7
+/// (truncation below 6e-9 on |r| <= ln(2) / 2).
+template <class D>
+inline D lexp_single(const D& x_in) {
+  using L = Lanes<D>;
+  using LI = LaneInts<D>;
+  using I = typename LI::I;
+  const D x = lclamp(x_in, -170.0, 170.0);             // beyond: 0 or inf anyway; NaN stays NaN
+  const D shift = L::splat(12582912.0);                // 1.5 * 2^23: adding it rounds to an integer
+  D n = (x * 1.44269504f + shift) - shift;             // round(x / ln 2)
+  n = L::sel(n == n, n, L::splat(0.0));
+  const D r = (x - n * 0.693359375f) - n * -2.12194440e-4f;
+  constexpr float c[8] = {1.0f / 5040.0f, 1.0f / 720.0f, 1.0f / 120.0f, 1.0f / 24.0f, 1.0f / 6.0f, 0.5f, 1.0f, 1.0f};
+  D p = L::splat(c[0]);
+  for (int k = 1; k < 8; ++k) p = p * r + c[k];
+  const I k = LI::from_integral(n);
+  const I k1 = k >> 1, k2 = k - k1;  // |k1|, |k2| <= 123: both powers of two are normal floats
+  const D s1 = std::bit_cast<D>((k1 + 127) << 23), s2 = std::bit_cast<D>((k2 + 127) << 23);
+  return (p * s1) * s2;
+}
+
+/// ln x in single precision for positive normal finite x (NaN otherwise), within about 1 ulp: as
+/// llog below with fdlibm's single-precision minimax polynomial (e_logf.c) and ln 2 in two parts.
+template <class D>
+inline D llog_single(const D& x) {
+  using L = Lanes<D>;
+  using LI = LaneInts<D>;
+  using I = typename LI::I;
+  const I bits = std::bit_cast<I>(x);
+  I e = ((bits >> 23) & 0xff) - 127;
+  D m = std::bit_cast<D>((bits & 0x007fffff) | (I{} + (127 << 23)));  // [1, 2)
+  const auto big = m > L::splat(1.41421356f);
+  m = L::sel(big, m * 0.5f, m);
+  e = e + LI::one_where(big);
+  const D f = m - 1.0f;  // exact (Sterbenz)
+  const D s = f / (2.0f + f), z = s * s;
+  const D R = z * (0x1.555554p-1f + z * (0x1.999c26p-2f + z * (0x1.23d3dcp-2f + z * 0x1.f13c4cp-3f)));
+  const D hfsq = 0.5f * f * f;
+  D de = L::splat(0.0);
+  if constexpr (std::is_arithmetic_v<D>) de = float(e);
+  else de = __builtin_convertvector(e, D);
+  const D r = de * 6.9313812256e-01f + (f - (hfsq - (s * (hfsq + R) + de * 9.0580006145e-06f)));
+  const auto normal = mand(x >= L::splat(0x1p-126), x <= L::splat(0x1.fffffep127));
+  return L::sel(normal, r, L::splat(std::numeric_limits<double>::quiet_NaN()));
+}
 
 /// e^x, lane by lane, within 1 ulp or so of the exact value (tested against std::exp): x = n ln 2 + r
 /// with |r| <= ln(2) / 2 (Cody-Waite, ln 2 in two parts), e^r by its Taylor polynomial of degree 13
@@ -200,7 +342,7 @@ struct LaneInts<ProjVec> {
 /// gives inf, -inf gives 0. Written once for both lane types, so the vector and scalar projections
 /// agree bit for bit without calling libm lane by lane.
 template <class D>
-inline D lexp(const D& x_in) {
+inline D lexp_double(const D& x_in) {
   using L = Lanes<D>;
   using LI = LaneInts<D>;
   using I = typename LI::I;
@@ -226,7 +368,7 @@ inline D lexp(const D& x_in) {
 /// [sqrt(2)/2, sqrt(2)), and ln m = ln(1 + f) from s = f / (2 + f) with fdlibm's minimax polynomial
 /// (the coefficients of its e_log.c) and ln 2 in two parts.
 template <class D>
-inline D llog(const D& x) {
+inline D llog_double(const D& x) {
   using L = Lanes<D>;
   using LI = LaneInts<D>;
   using I = typename LI::I;
@@ -252,13 +394,26 @@ inline D llog(const D& x) {
   return L::sel(normal, r, L::splat(std::numeric_limits<double>::quiet_NaN()));
 }
 
+/// e^x and ln x in D's precision (lexp_double / lexp_single, llog_double / llog_single).
+template <class D>
+inline D lexp(const D& x) {
+  if constexpr (kSingleLanes<D>) return lexp_single(x);
+  else return lexp_double(x);
+}
+template <class D>
+inline D llog(const D& x) {
+  if constexpr (kSingleLanes<D>) return llog_single(x);
+  else return llog_double(x);
+}
+
 /// Numerically stable logistic function: 1 / (1 + e^-x) for x >= 0, e^x / (1 + e^x) below,
 /// with one exponential, e^-|x|, for both.
 template <class D>
 inline D lsigmoid(const D& x) {
   using L = Lanes<D>;
+  using T = typename L::T;
   const D e = lexp(L::sel(x < L::splat(0.0), x, -x));
-  return L::sel(x >= L::splat(0.0), 1.0 / (1.0 + e), e / (1.0 + e));
+  return L::sel(x >= L::splat(0.0), T(1) / (T(1) + e), e / (T(1) + e));
 }
 
 /// Rotation matrix (row-major) of a unit quaternion (w, x, y, z).
@@ -308,10 +463,12 @@ struct GeometryLanes {
   D mean[3], log_scale[3], quat[4], opacity_logit;
 };
 
-/// The forward result in lane type D (see ProjectedGaussian); `visible` is the lane mask.
+/// The forward result in lane type D (see ProjectedGaussian); `visible` is the lane mask. `hard`
+/// (single precision only): lanes left to the double-precision projection (see project_lanes),
+/// never visible here.
 template <class D>
 struct ProjectedLanes {
-  typename Lanes<D>::M visible;
+  typename Lanes<D>::M visible, hard;
   D mean2d[2], conic[3], depth, opacity, extent[2], support;
 };
 
@@ -355,22 +512,52 @@ inline typename Lanes<D>::M project_lanes(const GeometryLanes<D>& g, const Proje
                                           std::type_identity_t<ProjectionCacheLanes<D>>* cache_out,
                                           bool known_visible) {
   using PC = ProjectConstants;
+  using PL = ProjectPrecisionLimits;
   using L = Lanes<D>;
+  using T = typename L::T;
   using M = typename L::M;
+  constexpr bool kSingle = kSingleLanes<D>;
   const D zero = L::splat(0.0);
   M alive = lfinite(g.opacity_logit);
   MSGS_UNROLL
   for (int i = 0; i < 3; ++i) alive = mand(alive, lfinite(g.mean[i]), lfinite(g.log_scale[i]));
   MSGS_UNROLL
   for (int i = 0; i < 4; ++i) alive = mand(alive, lfinite(g.quat[i]));
+  D mean_max = zero;  // max |mean component| (single precision only)
+  out.hard = M{};
+  if constexpr (kSingle) {
+    // Inputs beyond the limits (non-finite ones too) go to the double-precision projection.
+    M tame = alive;
+    MSGS_UNROLL
+    for (int i = 0; i < 3; ++i) {
+      mean_max = lmax(mean_max, lmax(g.mean[i], -g.mean[i]));
+      tame = mand(tame, g.log_scale[i] <= L::splat(PL::kLogScale), -g.log_scale[i] <= L::splat(PL::kLogScale));
+    }
+    tame = mand(tame, mean_max <= L::splat(PL::kMean));
+    MSGS_UNROLL
+    for (int i = 0; i < 4; ++i) tame = mand(tame, g.quat[i] <= L::splat(PL::kQuat), -g.quat[i] <= L::splat(PL::kQuat));
+    out.hard = L::not_(tame);
+    alive = tame;
+  }
   out.visible = alive;
   if (!L::any(alive)) return alive;
   ProjectionCacheLanes<D> c;
-  const double* W = cam.rot;
+  T W[9];  // the camera in D's precision
+  MSGS_UNROLL
+  for (int i = 0; i < 9; ++i) W[i] = T(cam.rot[i]);
+  const T fx = T(cam.fx), fy = T(cam.fy);
   MSGS_UNROLL
   for (int i = 0; i < 3; ++i)
-    c.tcam[i] = ((W[3 * i] * g.mean[0] + W[3 * i + 1] * g.mean[1]) + W[3 * i + 2] * g.mean[2]) + cam.trans[i];
+    c.tcam[i] = ((W[3 * i] * g.mean[0] + W[3 * i + 1] * g.mean[1]) + W[3 * i + 2] * g.mean[2]) + T(cam.trans[i]);
   const D tz = c.tcam[2];
+  if constexpr (kSingle) {
+    // The camera-space mean carries an absolute rounding error of about 2^-24 (|mean| + |t|):
+    // where that is not small against the depth, project in double.
+    const T t_max = T(std::max({std::abs(cam.trans[0]), std::abs(cam.trans[1]), std::abs(cam.trans[2])}));
+    const M shallow = L::not_(T(2) * mean_max + t_max <= T(PL::kDepthRatio) * lmax(tz, -tz));
+    out.hard = mor(out.hard, mand(alive, shallow));
+    alive = mand(alive, L::not_(shallow));
+  }
   alive = mand(alive, tz > L::splat(cam.near_plane), L::not_(tz > L::splat(cam.far_plane)));
   if (!L::any(alive)) return out.visible = alive;
 
@@ -378,7 +565,7 @@ inline typename Lanes<D>::M project_lanes(const GeometryLanes<D>& g, const Proje
   c.qnorm = L::sqrt(quat[0] * quat[0] + quat[1] * quat[1] + quat[2] * quat[2] + quat[3] * quat[3]);
   alive = mand(alive, c.qnorm >= L::splat(PC::kMinQuatNorm));
   if (!L::any(alive)) return out.visible = alive;
-  const D inv_qnorm = 1.0 / c.qnorm;  // divisions are the projection's slowest operations
+  const D inv_qnorm = T(1) / c.qnorm;  // divisions are the projection's slowest operations
   MSGS_UNROLL
   for (int i = 0; i < 4; ++i) c.qhat[i] = quat[i] * inv_qnorm;
 
@@ -386,12 +573,12 @@ inline typename Lanes<D>::M project_lanes(const GeometryLanes<D>& g, const Proje
   alive = mand(alive, c.sig >= L::splat(PC::kMinAlpha));
   if (!L::any(alive)) return out.visible = alive;
 
-  c.inv_tz = 1.0 / tz;
+  c.inv_tz = T(1) / tz;
   c.txz = c.tcam[0] * c.inv_tz;
   c.tyz = c.tcam[1] * c.inv_tz;
   const D txc = lmin(L::splat(cam.lim_x_pos), lmax(L::splat(-cam.lim_x_neg), c.txz));
   const D tyc = lmin(L::splat(cam.lim_y_pos), lmax(L::splat(-cam.lim_y_neg), c.tyz));
-  const D mean_x = cam.fx * c.txz + cam.cx, mean_y = cam.fy * c.tyz + cam.cy;
+  const D mean_x = fx * c.txz + T(cam.cx), mean_y = fy * c.tyz + T(cam.cy);
 
   // Far off-screen? Most Gaussians of a large scene are outside any one view, so bound the screen
   // extent before building the covariance: cov2d(0,0) = j0^T cov_cam j0 <= s_max^2 |j0|^2 with
@@ -403,11 +590,13 @@ inline typename Lanes<D>::M project_lanes(const GeometryLanes<D>& g, const Proje
   if (!cache_out) {
     const D ls_max = lmax(g.log_scale[0], lmax(g.log_scale[1], g.log_scale[2]));
     const D smax = lexp(lclamp(ls_max, -PC::kLogScaleClamp, PC::kLogScaleClamp));
-    log_sig = llog(c.sig / PC::kMinAlpha);
-    kb = L::sqrt(lmax(zero, 2.0 * log_sig));
-    const D sx = smax * cam.fx * c.inv_tz, sy = smax * cam.fy * c.inv_tz;
-    const D bx = kb * L::sqrt(sx * sx * (1.0 + txc * txc) + PC::kDilation) * (1.0 + 1e-6) + 1e-6;
-    const D by = kb * L::sqrt(sy * sy * (1.0 + tyc * tyc) + PC::kDilation) * (1.0 + 1e-6) + 1e-6;
+    log_sig = llog(c.sig / T(PC::kMinAlpha));
+    kb = L::sqrt(lmax(zero, T(2) * log_sig));
+    const D sx = smax * fx * c.inv_tz, sy = smax * fy * c.inv_tz;
+    // A bound with a relative margin of 1e-6 (single precision: 1e-4) against rounding.
+    constexpr T kMargin = kSingle ? T(1e-4) : T(1e-6);
+    const D bx = kb * L::sqrt(sx * sx * (T(1) + txc * txc) + T(PC::kDilation)) * (T(1) + kMargin) + kMargin;
+    const D by = kb * L::sqrt(sy * sy * (T(1) + tyc * tyc) + T(PC::kDilation)) * (T(1) + kMargin) + kMargin;
     const M off = mor(mean_x + bx < L::splat(-1.0), mean_x - bx > L::splat(cam.width + 1.0),
                       mean_y + by < L::splat(-1.0), mean_y - by > L::splat(cam.height + 1.0));
     alive = mand(alive, L::not_(off));
@@ -433,9 +622,9 @@ inline typename Lanes<D>::M project_lanes(const GeometryLanes<D>& g, const Proje
 
   // EWA Jacobian with the generalised tan-fov clamp.
   // J02 = -fx tx / tz^2 with tx = tz txc, i.e. -fx txc / tz.
-  c.J00 = cam.fx * c.inv_tz;
+  c.J00 = fx * c.inv_tz;
   c.J02 = -c.J00 * txc;
-  c.J11 = cam.fy * c.inv_tz;
+  c.J11 = fy * c.inv_tz;
   c.J12 = -c.J11 * tyc;
   // cov2d = J cov_cam J^T = (J WM)(J WM)^T, with J's zeros skipped; symmetric by construction.
   D T0[3], T1[3];
@@ -447,16 +636,30 @@ inline typename Lanes<D>::M project_lanes(const GeometryLanes<D>& g, const Proje
   c.cov2d[0] = T0[0] * T0[0] + T0[1] * T0[1] + T0[2] * T0[2];
   c.cov2d[1] = T0[0] * T1[0] + T0[1] * T1[1] + T0[2] * T1[2];
   c.cov2d[2] = T1[0] * T1[0] + T1[1] * T1[1] + T1[2] * T1[2];
-  c.blur[0] = c.cov2d[0] + PC::kDilation;
+  c.blur[0] = c.cov2d[0] + T(PC::kDilation);
   c.blur[1] = c.cov2d[1];
-  c.blur[2] = c.cov2d[2] + PC::kDilation;
-  c.det_blur = c.blur[0] * c.blur[2] - c.blur[1] * c.blur[1];
+  c.blur[2] = c.cov2d[2] + T(PC::kDilation);
+  if constexpr (kSingle) {
+    // Screen footprints beyond the limit go to the double-precision projection.
+    const M huge = L::not_(lmax(c.cov2d[0], c.cov2d[2]) <= L::splat(PL::kCov2d));
+    out.hard = mor(out.hard, mand(alive, huge));
+    alive = mand(alive, L::not_(huge));
+    // det cov2d = det(T T^T) for the 2x3 matrix T = [T0; T1] as a sum of squared 2x2 minors
+    // (Cauchy-Binet): never negative, and free of the cancellation of a c - b^2 for needles, which
+    // in single precision can exceed the 0.3 px^2 filter's share of the determinant.
+    const D m01 = T0[0] * T1[1] - T0[1] * T1[0], m02 = T0[0] * T1[2] - T0[2] * T1[0];
+    const D m12 = T0[1] * T1[2] - T0[2] * T1[1];
+    c.det_orig = (m01 * m01 + m02 * m02) + m12 * m12;
+    c.det_blur = (c.det_orig + T(PC::kDilation) * (c.cov2d[0] + c.cov2d[2])) + T(PC::kDilation * PC::kDilation);
+  } else {
+    c.det_blur = c.blur[0] * c.blur[2] - c.blur[1] * c.blur[1];
+    c.det_orig = c.cov2d[0] * c.cov2d[2] - c.cov2d[1] * c.cov2d[1];
+  }
   alive = mand(alive, c.det_blur > zero, lfinite(c.det_blur));
   if (!L::any(alive)) return out.visible = alive;
 
   c.compensation = L::splat(1.0);
   c.compensation_floored = M{};
-  c.det_orig = c.cov2d[0] * c.cov2d[2] - c.cov2d[1] * c.cov2d[1];
   if constexpr (Antialiased) {
     const D comp = L::sqrt(lmax(zero, c.det_orig / c.det_blur));
     c.compensation_floored = L::not_(comp > L::splat(PC::kMinCompensation));
@@ -468,7 +671,7 @@ inline typename Lanes<D>::M project_lanes(const GeometryLanes<D>& g, const Proje
 
   out.mean2d[0] = mean_x;
   out.mean2d[1] = mean_y;
-  const D inv_det = 1.0 / c.det_blur;
+  const D inv_det = T(1) / c.det_blur;
   out.conic[0] = c.blur[2] * inv_det;
   out.conic[1] = -c.blur[1] * inv_det;
   out.conic[2] = c.blur[0] * inv_det;
@@ -478,8 +681,8 @@ inline typename Lanes<D>::M project_lanes(const GeometryLanes<D>& g, const Proje
     // alpha >= 1/255  <=>  sigma <= ln(255 o): the exact support, no 3-sigma cut-off, so the tiled
     // renderer paints exactly what a per-pixel loop over all Gaussians would.
     const bool reuse = !Antialiased && !cache_out;  // opacity == sig: the pre-test's values hold
-    out.support = reuse ? log_sig : llog(opacity / PC::kMinAlpha);
-    const D k = reuse ? kb : L::sqrt(lmax(zero, 2.0 * out.support));
+    out.support = reuse ? log_sig : llog(opacity / T(PC::kMinAlpha));
+    const D k = reuse ? kb : L::sqrt(lmax(zero, T(2) * out.support));
     out.extent[0] = k * L::sqrt(c.blur[0]);
     out.extent[1] = k * L::sqrt(c.blur[2]);
     alive = mand(alive, lfinite(out.mean2d[0]), lfinite(out.mean2d[1]), lfinite(out.extent[0]), lfinite(out.extent[1]));
@@ -501,32 +704,38 @@ inline typename Lanes<D>::M project_lanes(const GeometryLanes<D>& g, const Proje
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #endif
 /// project_bwd in lane type D: accumulates into `grad` the gradients of the lanes that project
-/// (the others are left as they are). See project_bwd.
+/// (the others are left as they are). Returns the lanes left to the double-precision projection
+/// (ProjectedLanes::hard; none in double), whose gradients are not touched either. See project_bwd.
 template <bool Antialiased, class D>
-inline void project_bwd_lanes(const GeometryLanes<D>& g, const ProjectCamera& cam, const ProjectedGradLanes<D>& v,
-                              GeometryGradLanes<D>& grad, bool known_visible) {
+inline typename Lanes<D>::M project_bwd_lanes(const GeometryLanes<D>& g, const ProjectCamera& cam,
+                                              const ProjectedGradLanes<D>& v, GeometryGradLanes<D>& grad,
+                                              bool known_visible) {
   using L = Lanes<D>;
+  using T = typename L::T;
   using M = typename L::M;
   const D zero = L::splat(0.0);
   ProjectedLanes<D> out;
   ProjectionCacheLanes<D> c;  // both set by project_lanes whenever a lane projects
   const M alive = project_lanes<Antialiased>(g, cam, out, &c, known_visible);
-  if (!L::any(alive)) return;
-  const double* W = cam.rot;
+  if (!L::any(alive)) return out.hard;
+  T W[9];
+  MSGS_UNROLL
+  for (int i = 0; i < 9; ++i) W[i] = T(cam.rot[i]);
+  const T fx = T(cam.fx), fy = T(cam.fy);
   // Gradients of culled lanes (only with vectors; the scalar form returned above) are dropped.
   auto add = [&](D& acc, const D& d) {
-    if constexpr (std::is_same_v<D, double>) acc += d;
+    if constexpr (std::is_arithmetic_v<D>) acc += d;
     else acc += L::sel(alive, d, zero);
   };
 
   // Opacity: o = sigmoid(logit) * compensation.
-  add(grad.opacity_logit, v.opacity * c.compensation * c.sig * (1.0 - c.sig));
+  add(grad.opacity_logit, v.opacity * c.compensation * c.sig * (T(1) - c.sig));
 
   // Conic Q = inverse(cov2d_blur): dL/dCov = -Q dL/dQ Q with Q symmetric; b appears twice in Q,
   // so dL/dQ has b's gradient halved off the diagonal. G = v_cov is the gradient w.r.t.
   // cov2d_blur as a full 2x2 matrix [[G00, G01], [G10, G11]].
   const D qa = out.conic[0], qb = out.conic[1], qc = out.conic[2];
-  const D va = v.conic[0], vb = 0.5 * v.conic[1], vc = v.conic[2];
+  const D va = v.conic[0], vb = T(0.5) * v.conic[1], vc = v.conic[2];
   const D P00 = qa * va + qb * vb, P01 = qa * vb + qb * vc, P10 = qb * va + qc * vb, P11 = qb * vb + qc * vc;
   D G00 = -(P00 * qa + P01 * qb), G01 = -(P00 * qb + P01 * qc);
   D G10 = -(P10 * qa + P11 * qb), G11 = -(P10 * qb + P11 * qc);
@@ -536,7 +745,7 @@ inline void project_bwd_lanes(const GeometryLanes<D>& g, const ProjectCamera& ca
     // No gradient where the compensation is floored.
     const D v_comp = L::sel(c.compensation_floored, zero, v.opacity * c.sig);
     const D r = c.det_orig / c.det_blur;
-    const D v_r = L::sel(c.compensation_floored, zero, v_comp * 0.5 / L::sqrt(r));
+    const D v_r = L::sel(c.compensation_floored, zero, v_comp * T(0.5) / L::sqrt(r));
     // r depends on cov2d through both determinants (cov2d_blur = cov2d + 0.3 I).
     const D k_orig = v_r / c.det_blur, k_blur = v_r * c.det_orig / (c.det_blur * c.det_blur);
     G00 += k_orig * c.cov2d[2] - k_blur * c.blur[2];
@@ -555,7 +764,7 @@ inline void project_bwd_lanes(const GeometryLanes<D>& g, const ProjectCamera& ca
   MSGS_UNROLL
   for (int i = 0; i < 3; ++i)
     MSGS_UNROLL
-    for (int j = 0; j < 3; ++j) v_cc2[3 * i + j] = 2.0 * (Jcol[i][0] * GJ[0][j] + Jcol[i][1] * GJ[1][j]);
+    for (int j = 0; j < 3; ++j) v_cc2[3 * i + j] = T(2) * (Jcol[i][0] * GJ[0][j] + Jcol[i][1] * GJ[1][j]);
   // C = WM WM^T; v_J = 2 GJ C, needed at (0,0), (0,2), (1,1), (1,2).
   D C[9];
   MSGS_UNROLL
@@ -563,28 +772,28 @@ inline void project_bwd_lanes(const GeometryLanes<D>& g, const ProjectCamera& ca
     MSGS_UNROLL
     for (int j = 0; j < 3; ++j)
       C[3 * i + j] = c.WM[3 * i] * c.WM[3 * j] + c.WM[3 * i + 1] * c.WM[3 * j + 1] + c.WM[3 * i + 2] * c.WM[3 * j + 2];
-  auto v_J = [&](int a, int j) { return 2.0 * (GJ[a][0] * C[j] + GJ[a][1] * C[3 + j] + GJ[a][2] * C[6 + j]); };
+  auto v_J = [&](int a, int j) { return T(2) * (GJ[a][0] * C[j] + GJ[a][1] * C[3 + j] + GJ[a][2] * C[6 + j]); };
   const D vJ00 = v_J(0, 0), vJ02 = v_J(0, 2), vJ11 = v_J(1, 1), vJ12 = v_J(1, 2);
 
   // J entries -> camera-space mean (clamped components only depend on tz).
   D v_t[3] = {zero, zero, zero};
   const D iz = c.inv_tz, iz2 = iz * iz, iz3 = iz2 * iz;
-  v_t[2] += -cam.fx * iz2 * vJ00 - cam.fy * iz2 * vJ11;
+  v_t[2] += -fx * iz2 * vJ00 - fy * iz2 * vJ11;
   const M x_clamped = mor(c.txz > L::splat(cam.lim_x_pos), c.txz < L::splat(-cam.lim_x_neg));
   const M y_clamped = mor(c.tyz > L::splat(cam.lim_y_pos), c.tyz < L::splat(-cam.lim_y_neg));
   {
     const D Lx = lmin(L::splat(cam.lim_x_pos), lmax(L::splat(-cam.lim_x_neg), c.txz));
     // clamped: J02 = -fx L / tz depends on tz only; else on tx and tz.
-    v_t[2] += L::sel(x_clamped, cam.fx * Lx * iz2 * vJ02, 2.0 * cam.fx * c.tcam[0] * iz3 * vJ02);
-    v_t[0] += L::sel(x_clamped, zero, -cam.fx * iz2 * vJ02);
+    v_t[2] += L::sel(x_clamped, fx * Lx * iz2 * vJ02, T(2) * fx * c.tcam[0] * iz3 * vJ02);
+    v_t[0] += L::sel(x_clamped, zero, -fx * iz2 * vJ02);
     const D Ly = lmin(L::splat(cam.lim_y_pos), lmax(L::splat(-cam.lim_y_neg), c.tyz));
-    v_t[2] += L::sel(y_clamped, cam.fy * Ly * iz2 * vJ12, 2.0 * cam.fy * c.tcam[1] * iz3 * vJ12);
-    v_t[1] += L::sel(y_clamped, zero, -cam.fy * iz2 * vJ12);
+    v_t[2] += L::sel(y_clamped, fy * Ly * iz2 * vJ12, T(2) * fy * c.tcam[1] * iz3 * vJ12);
+    v_t[1] += L::sel(y_clamped, zero, -fy * iz2 * vJ12);
   }
   // Projected mean (unclamped).
-  v_t[0] += cam.fx * iz * v.mean2d[0];
-  v_t[1] += cam.fy * iz * v.mean2d[1];
-  v_t[2] += -cam.fx * c.tcam[0] * iz2 * v.mean2d[0] - cam.fy * c.tcam[1] * iz2 * v.mean2d[1];
+  v_t[0] += fx * iz * v.mean2d[0];
+  v_t[1] += fy * iz * v.mean2d[1];
+  v_t[2] += -fx * c.tcam[0] * iz2 * v.mean2d[0] - fy * c.tcam[1] * iz2 * v.mean2d[1];
   v_t[2] += v.depth;
   MSGS_UNROLL
   for (int i = 0; i < 3; ++i) add(grad.mean[i], W[i] * v_t[0] + W[3 + i] * v_t[1] + W[6 + i] * v_t[2]);
@@ -605,25 +814,27 @@ inline void project_bwd_lanes(const GeometryLanes<D>& g, const ProjectCamera& ca
   D v_qhat[4];
   quat_to_rotation_backward(c.qhat, v_Rq, v_qhat);
   const D qdot = c.qhat[0] * v_qhat[0] + c.qhat[1] * v_qhat[1] + c.qhat[2] * v_qhat[2] + c.qhat[3] * v_qhat[3];
-  const D inv_qnorm = 1.0 / c.qnorm;
+  const D inv_qnorm = T(1) / c.qnorm;
   MSGS_UNROLL
   for (int i = 0; i < 4; ++i) add(grad.quat[i], (v_qhat[i] - c.qhat[i] * qdot) * inv_qnorm);
+  return out.hard;
 }
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic pop
 #endif
 
-/// The geometry of the Gaussians ids[0 .. kProjLanes) of `m` as the lanes of one projection vector.
-template <class G, class S>
-inline void gather_geometry(const GaussianModel<G, S>& m, const std::uint32_t* ids, GeometryLanes<ProjVec>& g) {
-  for (int l = 0; l < kProjLanes; ++l) {
+/// The geometry of the Gaussians ids[0 .. Lanes<D>::kCount) of `m` as the lanes of D.
+template <class D, class G, class S>
+inline void gather_geometry(const GaussianModel<G, S>& m, const std::uint32_t* ids, GeometryLanes<D>& g) {
+  using T = typename Lanes<D>::T;
+  for (int l = 0; l < Lanes<D>::kCount; ++l) {
     const std::size_t i = ids[l];
     for (int k = 0; k < 3; ++k) {
-      g.mean[k][l] = double(m.means[3 * i + std::size_t(k)]);
-      g.log_scale[k][l] = double(m.log_scales[3 * i + std::size_t(k)]);
+      set_lane(g.mean[k], l, T(m.means[3 * i + std::size_t(k)]));
+      set_lane(g.log_scale[k], l, T(m.log_scales[3 * i + std::size_t(k)]));
     }
-    for (int k = 0; k < 4; ++k) g.quat[k][l] = double(m.quats[4 * i + std::size_t(k)]);
-    g.opacity_logit[l] = double(m.opacity_logits[i]);
+    for (int k = 0; k < 4; ++k) set_lane(g.quat[k], l, T(m.quats[4 * i + std::size_t(k)]));
+    set_lane(g.opacity_logit, l, T(m.opacity_logits[i]));
   }
 }
 

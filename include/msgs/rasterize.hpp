@@ -26,11 +26,15 @@ namespace msgs {
 /// accumulated depth sum_i w_i z_i. `antialiased`: gsplat's antialiased mode (opacity times
 /// sqrt(det cov2d / det(cov2d + 0.3 I))). `absgrad`: the backward also fills Gradients::absgrad
 /// (sum over pixels of |per-pixel dL/dmean2d|, what absgrad densification reads; as in gsplat it
-/// is opt-in: it adds about 13% to the backward of the benchmark frame).
+/// is opt-in: it adds about 13% to the backward of the benchmark frame). `single_precision`: project
+/// and shade in single precision, twice as many Gaussians per vector instruction, handing the
+/// Gaussians that need it to the double-precision projection (ProjectPrecisionLimits); off, every
+/// Gaussian is projected in double, the reference behaviour.
 struct RasterOptions {
   bool depth = false;
   bool antialiased = false;
   bool absgrad = false;
+  bool single_precision = false;
 };
 
 /// Wall-clock seconds spent in each stage, accumulated over calls (reset with `reset()`).
@@ -121,7 +125,7 @@ class Rasterizer {
     if (fill == GradientFill::dense) zero_unseen(grads);
 
     // Blend backward: one gradient record per intersection, per-tile background partials.
-    using Rec = BlendRecord<Opt.depth, Opt.absgrad>;
+    using Rec = BlendRec;
     const int R = Rec::size(count_);
     records_.resize(bins_.pairs() * std::uint64_t(R));
     bg_partial_.assign(std::size_t(grid_.count()) * std::size_t(count_), S(0));
@@ -146,20 +150,33 @@ class Rasterizer {
     // Per-Gaussian reduction in a fixed (tile) order, then projection and colour backward.
     // Gaussians are visited in index order (model, gradients and pair lists are then read and
     // written sequentially); only their intersection records are scattered over the tile lists.
-    // Gaussians are projected kProjLanes at a time (detail::project_bwd_lanes, the same bits as one
-    // at a time), in fixed batches of consecutive visible ids.
-    using D = detail::ProjVec;
-    constexpr int L = detail::kProjLanes;
+    // Gaussians are projected a vector of lanes at a time (detail::project_bwd_lanes, the same bits
+    // as one at a time), in fixed batches of consecutive visible ids; in single precision the
+    // lanes it hands back are redone one at a time in double, as the forward did.
+    using D = ProjLanes;
+    constexpr int L = detail::Lanes<D>::kCount;
     const std::int64_t V = std::int64_t(visible_.size()), batches = (V + L - 1) / L;
     const std::uint64_t M = bins_.pairs();
-    const ProjectCamera& pcam = pcam_;
-    const int first = first_, count = count_, deg = sh_degree_;
+    const int first = first_, count = count_;
 #pragma omp parallel for schedule(dynamic, 32)
     for (std::int64_t bi = 0; bi < batches; ++bi) {
       const std::int64_t v0 = bi * L;
       const int n = int(std::min<std::int64_t>(L, V - v0));
       std::uint32_t ids[L];
       for (int l = 0; l < L; ++l) ids[l] = visible_[std::size_t(v0 + (l < n ? l : 0))];
+      // The batch's rows are not consecutive (ids skip what the view did not see): fetch its colour
+      // rows and geometry while the reduction below runs.
+      for (int l = 0; l < n; ++l) {
+        const std::size_t g = ids[l];
+        for (int ch = first; ch < first + count; ++ch) {
+          const S* row = model.sh_row(g, ch);
+          __builtin_prefetch(row);
+          __builtin_prefetch(row + G::sh_coeffs - 1);
+        }
+        __builtin_prefetch(&model.means[3 * g]);
+        __builtin_prefetch(&model.log_scales[3 * g]);
+        __builtin_prefetch(&model.quats[4 * g]);
+      }
       double acc[L][Rec::size(kBands)] = {};  // lanes past n stay zero
       for (int l = 0; l < n; ++l) {
         const std::size_t v = std::size_t(v0 + l);
@@ -174,54 +191,10 @@ class Rasterizer {
           for (int k = 0; k < R; ++k) acc[l][k] += double(rec[k]);
         }
       }
-      detail::GeometryLanes<D> geo;
-      detail::gather_geometry(model, ids, geo);
-      detail::ProjectedGradLanes<D> pg{};
-      detail::GeometryGradLanes<D> gg{};
-      for (int l = 0; l < n; ++l) {
-        pg.mean2d[0][l] = acc[l][Rec::kMeanX];
-        pg.mean2d[1][l] = acc[l][Rec::kMeanY];
-        pg.conic[0][l] = acc[l][Rec::kConicA];
-        pg.conic[1][l] = acc[l][Rec::kConicB];
-        pg.conic[2][l] = acc[l][Rec::kConicC];
-        pg.opacity[l] = acc[l][Rec::kOpacity];
-        if constexpr (Opt.depth) pg.depth[l] = acc[l][Rec::depth(count)];
-      }
-      detail::project_bwd_lanes<Opt.antialiased>(geo, pcam, pg, gg, /*known_visible=*/true);
-      // Colour backward for the whole vector: dL/dSH into the band planes, dL/d(mean) through the
-      // view direction added to gg.mean.
-      {
-        using LD = detail::Lanes<D>;
-        const D raw[3] = {geo.mean[0] - LD::splat(pcam.position[0]), geo.mean[1] - LD::splat(pcam.position[1]),
-                          geo.mean[2] - LD::splat(pcam.position[2])};
-        D v_colour[kBands];
-        for (int ch = 0; ch < count; ++ch) {
-          v_colour[ch] = LD::splat(0.0);
-          for (int l = 0; l < n; ++l) v_colour[ch][l] = acc[l][Rec::kBase + ch];
-        }
-        const int K = sh_coeffs_for_degree(deg);
-        ShLanes cf, v_sh;
-        cf.gather(model, ids, first, count, K);
-        detail::colour_bwd_lanes<D>(
-            count, deg, raw, [&](int ch, int k) { return cf.load(ch, k); }, v_colour,
-            [&](int ch, int k, const D& v) { v_sh.store(ch, k, v); }, gg.mean);
-        v_sh.scatter(grads.model, ids, n, first, count, K);  // coefficients above the active degree: zero
-      }
-      for (int l = 0; l < n; ++l) {
-        const std::uint32_t g = ids[l];
-        grads.mean2d[2 * g] = S(pg.mean2d[0][l]);
-        grads.mean2d[2 * g + 1] = S(pg.mean2d[1][l]);
-        if constexpr (Opt.absgrad) {
-          grads.absgrad[2 * g] = S(acc[l][Rec::abs_x(count)]);
-          grads.absgrad[2 * g + 1] = S(acc[l][Rec::abs_x(count) + 1]);
-        }
-        for (int i = 0; i < 3; ++i) {
-          grads.model.means[3 * g + i] = S(gg.mean[i][l]);
-          grads.model.log_scales[3 * g + i] = S(gg.log_scale[i][l]);
-        }
-        for (int i = 0; i < 4; ++i) grads.model.quats[4 * g + i] = S(gg.quat[i][l]);
-        grads.model.opacity_logits[g] = S(gg.opacity_logit[l]);
-      }
+      const std::uint32_t hard = backward_batch<D>(model, ids, n, acc, grads);
+      if constexpr (Opt.single_precision)
+        for (int l = 0; l < n; ++l)
+          if (hard >> l & 1u) backward_batch<double>(model, &ids[l], 1, &acc[l], grads);
     }
     const auto t2 = clock::now();
     timings_.blend_backward += std::chrono::duration<double>(t1 - t0).count();
@@ -256,6 +229,79 @@ class Rasterizer {
   int band_count() const { return count_; }
 
  private:
+  using BlendRec = BlendRecord<Opt.depth, Opt.absgrad>;
+  /// Lane type of the projection: a vector of floats or of doubles (RasterOptions::single_precision).
+  using ProjLanes = std::conditional_t<Opt.single_precision, detail::ProjVecF, detail::ProjVec>;
+
+  /// Bits of the set lanes of a projection mask (bit 0 for one lane).
+  template <class Mask>
+  static std::uint32_t mask_bits(const Mask& m) {
+    if constexpr (std::is_same_v<Mask, bool>) return m ? 1u : 0u;
+    else return detail::lane_bits(m);
+  }
+
+  /// Projection and colour backward of the visible Gaussians ids[0 .. n) (lanes past n repeat
+  /// ids[0]), from their reduced records acc[l]: writes their rows of `grads`. Returns the lanes
+  /// handed to double precision (bits; their rows are not written).
+  template <class D>
+  std::uint32_t backward_batch(const Model& model, const std::uint32_t* ids, int n,
+                               const double (*acc)[BlendRec::size(kBands)], Gradients<G, S>& grads) const {
+    using Rec = BlendRec;
+    using LD = detail::Lanes<D>;
+    using T = typename LD::T;
+    const ProjectCamera& pcam = pcam_;
+    const int first = first_, count = count_, deg = sh_degree_;
+    detail::GeometryLanes<D> geo;
+    detail::gather_geometry(model, ids, geo);
+    detail::ProjectedGradLanes<D> pg{};
+    detail::GeometryGradLanes<D> gg{};
+    for (int l = 0; l < n; ++l) {
+      detail::set_lane(pg.mean2d[0], l, T(acc[l][Rec::kMeanX]));
+      detail::set_lane(pg.mean2d[1], l, T(acc[l][Rec::kMeanY]));
+      detail::set_lane(pg.conic[0], l, T(acc[l][Rec::kConicA]));
+      detail::set_lane(pg.conic[1], l, T(acc[l][Rec::kConicB]));
+      detail::set_lane(pg.conic[2], l, T(acc[l][Rec::kConicC]));
+      detail::set_lane(pg.opacity, l, T(acc[l][Rec::kOpacity]));
+      if constexpr (Opt.depth) detail::set_lane(pg.depth, l, T(acc[l][Rec::depth(count)]));
+    }
+    const std::uint32_t hard = mask_bits(detail::project_bwd_lanes<Opt.antialiased>(geo, pcam, pg, gg, /*known_visible=*/true));
+    // Colour backward for the whole vector: dL/dSH into the band planes, dL/d(mean) through the
+    // view direction added to gg.mean.
+    {
+      const D raw[3] = {geo.mean[0] - LD::splat(pcam.position[0]), geo.mean[1] - LD::splat(pcam.position[1]),
+                        geo.mean[2] - LD::splat(pcam.position[2])};
+      D v_colour[kBands]{};
+      for (int ch = 0; ch < count; ++ch) {
+        v_colour[ch] = LD::splat(0.0);
+        for (int l = 0; l < n; ++l) detail::set_lane(v_colour[ch], l, T(acc[l][Rec::kBase + ch]));
+      }
+      const int K = sh_coeffs_for_degree(deg);
+      ShLanes<D> cf, v_sh;
+      cf.gather(model, ids, first, count, K);
+      detail::colour_bwd_lanes<D>(
+          count, deg, raw, [&](int ch, int k) { return cf.load(ch, k); }, v_colour,
+          [&](int ch, int k, const D& v) { v_sh.store(ch, k, v); }, gg.mean);
+      v_sh.scatter(grads.model, ids, n, hard, first, count, K);  // coefficients above the active degree: zero
+    }
+    for (int l = 0; l < n; ++l) {
+      if (hard >> l & 1u) continue;
+      const std::uint32_t g = ids[l];
+      grads.mean2d[2 * g] = S(acc[l][Rec::kMeanX]);
+      grads.mean2d[2 * g + 1] = S(acc[l][Rec::kMeanY]);
+      if constexpr (Opt.absgrad) {
+        grads.absgrad[2 * g] = S(acc[l][Rec::abs_x(count)]);
+        grads.absgrad[2 * g + 1] = S(acc[l][Rec::abs_x(count) + 1]);
+      }
+      for (int i = 0; i < 3; ++i) {
+        grads.model.means[3 * g + i] = S(detail::lane(gg.mean[i], l));
+        grads.model.log_scales[3 * g + i] = S(detail::lane(gg.log_scale[i], l));
+      }
+      for (int i = 0; i < 4; ++i) grads.model.quats[4 * g + i] = S(detail::lane(gg.quat[i], l));
+      grads.model.opacity_logits[g] = S(detail::lane(gg.opacity_logit, l));
+    }
+    return hard;
+  }
+
   void check_grad_image(const Image<S>& img, int channels, const char* name) const {
     if (img.width != grid_.width || img.height != grid_.height)
       throw std::invalid_argument(std::string("Rasterizer::backward: ") + name + " is " + std::to_string(img.width) +
@@ -302,71 +348,87 @@ class Rasterizer {
   }
 
   void project_all(const Model& model) {
-    // kProjLanes Gaussians at a time (detail::project_lanes: the same bits as one at a time).
-    using D = detail::ProjVec;
-    constexpr int L = detail::kProjLanes;
+    // A vector of lanes at a time (detail::project_lanes: the same bits as one at a time); in
+    // single precision the lanes it hands back are redone one at a time in double.
+    using D = ProjLanes;
+    constexpr int L = detail::Lanes<D>::kCount;
     const std::int64_t N = std::int64_t(model.size()), batches = (N + L - 1) / L;
-    const int first = first_, count = count_, deg = sh_degree_;
 #pragma omp parallel for schedule(dynamic, 128)
     for (std::int64_t bi = 0; bi < batches; ++bi) {
       const std::int64_t i0 = bi * L;
       const int n = int(std::min<std::int64_t>(L, N - i0));
       std::uint32_t ids[L];
       for (int l = 0; l < L; ++l) ids[l] = std::uint32_t(i0 + (l < n ? l : 0));  // padding repeats the first
-      detail::GeometryLanes<D> geo;
-      detail::gather_geometry(model, ids, geo);
-      detail::ProjectedLanes<D> pl;
-      const auto visible = detail::project_lanes<Opt.antialiased>(geo, pcam_, pl, nullptr, false);
-      // Colour of the rendered channels for the whole vector (SH coefficients gathered from the
-      // band planes); a lane with a non-finite active coefficient is culled.
-      using LD = detail::Lanes<D>;
-      auto drawn = visible;  // and every active coefficient of the rendered channels finite
-      D col[kBands];
-      if (LD::any(visible)) {
-        D dir[3] = {LD::splat(0.0), LD::splat(0.0), LD::splat(1.0)};
-        if constexpr (G::sh_degree > 0) {
-          if (deg > 0) {
-            const D raw[3] = {geo.mean[0] - LD::splat(pcam_.position[0]), geo.mean[1] - LD::splat(pcam_.position[1]),
-                              geo.mean[2] - LD::splat(pcam_.position[2])};
-            D len;
-            detail::view_dir(raw, dir, len);
-          }
-        }
-        ShLanes cf;
-        cf.gather(model, ids, first, count, sh_coeffs_for_degree(deg));
-        detail::colour_fwd_lanes<D>(count, deg, dir, [&](int ch, int k) {
-          const D c = cf.load(ch, k);
-          drawn = detail::mand(drawn, detail::lfinite(c));
-          return c;
-        }, col);
-      }
-      for (int l = 0; l < n; ++l) {
-        const std::size_t i = ids[l];
-        rects_[i] = PixelRect{};  // culled until shown otherwise
-        radii_[2 * i] = radii_[2 * i + 1] = 0;
-        visible_flag_[i] = 0;
-        if (!drawn[l]) continue;
-        const double mx = pl.mean2d[0][l], my = pl.mean2d[1][l], ex = pl.extent[0][l], ey = pl.extent[1][l];
-        const PixelRect rect = pixel_rect(mx, my, ex, ey, grid_.width, grid_.height);
-        if (rect.empty()) continue;
-        Splat<S>& s = splats_[i];
-        s.mx = S(mx); s.my = S(my);
-        s.a = S(pl.conic[0][l]); s.b = S(pl.conic[1][l]); s.c = S(pl.conic[2][l]);
-        s.o = S(pl.opacity[l]);
-        s.z = S(pl.depth[l]);
-        set_sigma_cut(s, pl.support[l]);
-        s.rect = rect;
-        depth_[i] = S(pl.depth[l]);
-        for (int ch = 0; ch < count; ++ch) colours_[i * std::size_t(count) + std::size_t(ch)] = S(col[ch][l]);
-        rects_[i] = rect;
-        radii_[2 * i] = std::int32_t(std::min(std::ceil(ex), 1e9));
-        radii_[2 * i + 1] = std::int32_t(std::min(std::ceil(ey), 1e9));
-        visible_flag_[i] = 1;
-      }
+      const std::uint32_t hard = project_batch<D>(model, ids, n);
+      if constexpr (Opt.single_precision)
+        for (int l = 0; l < n; ++l)
+          if (hard >> l & 1u) project_batch<double>(model, &ids[l], 1);
     }
     visible_.clear();
     for (std::int64_t i = 0; i < N; ++i)
       if (visible_flag_[std::size_t(i)]) visible_.push_back(std::uint32_t(i));
+  }
+
+  /// Project and shade the Gaussians ids[0 .. n) (lanes past n repeat ids[0]) and write their
+  /// splats, colours, rectangles, radii and visibility. Returns the lanes handed to double
+  /// precision (bits; their rows are not written).
+  template <class D>
+  std::uint32_t project_batch(const Model& model, const std::uint32_t* ids, int n) {
+    using LD = detail::Lanes<D>;
+    const int first = first_, count = count_, deg = sh_degree_;
+    detail::GeometryLanes<D> geo;
+    detail::gather_geometry(model, ids, geo);
+    detail::ProjectedLanes<D> pl;
+    const auto visible = detail::project_lanes<Opt.antialiased>(geo, pcam_, pl, nullptr, false);
+    const std::uint32_t hard = mask_bits(pl.hard);
+    // Colour of the rendered channels for the whole vector (SH coefficients gathered from the
+    // band planes); a lane with a non-finite active coefficient is culled.
+    auto drawn = visible;  // and every active coefficient of the rendered channels finite
+    D col[kBands];
+    if (LD::any(visible)) {
+      D dir[3] = {LD::splat(0.0), LD::splat(0.0), LD::splat(1.0)};
+      if constexpr (G::sh_degree > 0) {
+        if (deg > 0) {
+          const D raw[3] = {geo.mean[0] - LD::splat(pcam_.position[0]), geo.mean[1] - LD::splat(pcam_.position[1]),
+                            geo.mean[2] - LD::splat(pcam_.position[2])};
+          D len;
+          detail::view_dir(raw, dir, len);
+        }
+      }
+      ShLanes<D> cf;
+      cf.gather(model, ids, first, count, sh_coeffs_for_degree(deg));
+      detail::colour_fwd_lanes<D>(count, deg, dir, [&](int ch, int k) {
+        const D c = cf.load(ch, k);
+        drawn = detail::mand(drawn, detail::lfinite(c));
+        return c;
+      }, col);
+    }
+    for (int l = 0; l < n; ++l) {
+      if (hard >> l & 1u) continue;
+      const std::size_t i = ids[l];
+      rects_[i] = PixelRect{};  // culled until shown otherwise
+      radii_[2 * i] = radii_[2 * i + 1] = 0;
+      visible_flag_[i] = 0;
+      if (!detail::lane_on(drawn, l)) continue;
+      const double mx = detail::lane(pl.mean2d[0], l), my = detail::lane(pl.mean2d[1], l);
+      const double ex = detail::lane(pl.extent[0], l), ey = detail::lane(pl.extent[1], l);
+      const PixelRect rect = pixel_rect(mx, my, ex, ey, grid_.width, grid_.height);
+      if (rect.empty()) continue;
+      Splat<S>& s = splats_[i];
+      s.mx = S(mx); s.my = S(my);
+      s.a = S(detail::lane(pl.conic[0], l)); s.b = S(detail::lane(pl.conic[1], l)); s.c = S(detail::lane(pl.conic[2], l));
+      s.o = S(detail::lane(pl.opacity, l));
+      s.z = S(detail::lane(pl.depth, l));
+      set_sigma_cut(s, double(detail::lane(pl.support, l)));
+      s.rect = rect;
+      depth_[i] = s.z;
+      for (int ch = 0; ch < count; ++ch) colours_[i * std::size_t(count) + std::size_t(ch)] = S(detail::lane(col[ch], l));
+      rects_[i] = rect;
+      radii_[2 * i] = std::int32_t(std::min(std::ceil(ex), 1e9));
+      radii_[2 * i + 1] = std::int32_t(std::min(std::ceil(ey), 1e9));
+      visible_flag_[i] = 1;
+    }
+    return hard;
   }
 
   BlendInputs<S> blend_inputs() const {
@@ -438,32 +500,36 @@ class Rasterizer {
     }
   }
 
-  /// SH coefficients of the rendered channels of a vector of Gaussians, lane-minor ([channel,
-  /// coefficient, lane]) so that a coefficient of all lanes is one vector load; gathered from and
-  /// scattered to the band planes one Gaussian's contiguous row at a time.
+  /// SH coefficients of the rendered channels of a vector of Gaussians (lane type D),
+  /// lane-minor ([channel, coefficient, lane]) so that a coefficient of all lanes is one vector
+  /// load; gathered from and scattered to the band planes one Gaussian's contiguous row at a time.
+  template <class D>
   struct ShLanes {
-    static constexpr int L = detail::kProjLanes;
-    alignas(64) double v[kBands][G::sh_coeffs][L];
+    using T = typename detail::Lanes<D>::T;
+    static constexpr int L = detail::Lanes<D>::kCount;
+    alignas(64) T v[kBands][G::sh_coeffs][L];
 
     template <class M>
     void gather(const M& m, const std::uint32_t* ids, int first, int count, int K) {
       for (int ch = 0; ch < count; ++ch)
         for (int l = 0; l < L; ++l) {
           const S* row = m.sh_row(ids[l], first + ch);
-          for (int k = 0; k < K; ++k) v[ch][k][l] = double(row[k]);
+          for (int k = 0; k < K; ++k) v[ch][k][l] = T(row[k]);
         }
     }
-    detail::ProjVec load(int ch, int k) const {
-      detail::ProjVec d;
+    D load(int ch, int k) const {
+      D d;
       std::memcpy(&d, v[ch][k], sizeof d);
       return d;
     }
-    void store(int ch, int k, const detail::ProjVec& d) { std::memcpy(v[ch][k], &d, sizeof d); }
-    /// Write the first n lanes' K coefficients of each channel into `g`, zeros above K.
+    void store(int ch, int k, const D& d) { std::memcpy(v[ch][k], &d, sizeof d); }
+    /// Write the first n lanes' K coefficients of each channel into `g`, zeros above K; lanes
+    /// whose bit is set in `skip` are left out.
     template <class M>
-    void scatter(M& g, const std::uint32_t* ids, int n, int first, int count, int K) const {
+    void scatter(M& g, const std::uint32_t* ids, int n, std::uint32_t skip, int first, int count, int K) const {
       for (int ch = 0; ch < count; ++ch)
         for (int l = 0; l < n; ++l) {
+          if (skip >> l & 1u) continue;
           S* row = g.sh_row(ids[l], first + ch);
           for (int k = 0; k < K; ++k) row[k] = S(v[ch][k][l]);
           for (int k = K; k < G::sh_coeffs; ++k) row[k] = S(0);

@@ -24,7 +24,7 @@ inline constexpr std::array<double, 7> C3 = {-0.5900435899266435, 2.890611442640
 template <class T>
 constexpr T cst(double x) {
   if constexpr (std::is_arithmetic_v<T>) return T(x);
-  else return x - T{};
+  else return std::remove_cvref_t<decltype(T{}[0])>(x) - T{};
 }
 
 /// Maximum number of coefficients (degree 3).

@@ -34,8 +34,9 @@
 namespace msgs {
 
 /// The trainer's rasteriser features: absgrad on, since the default densification (and MSAD)
-/// reads it; evaluation uses the same type so the forward is compiled once.
-inline constexpr RasterOptions kTrainRaster{.absgrad = true};
+/// reads it; single-precision projection (the hard cases in double); evaluation uses the same type
+/// so the forward is compiled once.
+inline constexpr RasterOptions kTrainRaster{.absgrad = true, .single_precision = true};
 
 /// A band as one trainer sees it: which model channels render it and which frames show it.
 struct TrainBand {

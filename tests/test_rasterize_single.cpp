@@ -1,0 +1,303 @@
+// tests/test_rasterize_single.cpp
+// The single-precision projection (RasterOptions::single_precision): its exp and log, its lanes
+// against the double-precision projection, the Gaussians it hands to double precision, and the
+// whole rasteriser against the reference renderer and the double-precision gradients.
+#include <doctest/doctest.h>
+
+#include <msgs/rasterize.hpp>
+
+#include "reference_renderer.hpp"
+
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <random>
+#include <vector>
+
+using namespace msgs;
+using namespace msgs::testing;
+
+namespace {
+
+/// |a - ref| in units of float's ulp at ref (ref exact, in double).
+double ulps_f(float a, double ref) {
+  const float rf = float(ref);
+  const double ulp = double(std::nextafter(std::abs(rf), INFINITY)) - double(std::abs(rf));
+  return std::abs(double(a) - ref) / ulp;
+}
+
+/// Random Gaussians in front of `c` (some off screen), none of them hard.
+std::vector<GaussianGeometry> tame_geometries(std::uint64_t seed, int n) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0), uz(1.0, 12.0), uls(-6.0, 0.5), uo(-4.0, 6.0);
+  std::vector<GaussianGeometry> gs;
+  for (int i = 0; i < n; ++i) {
+    GaussianGeometry g;
+    const double z = uz(rng);
+    g.mean = Eigen::Vector3d(1.2 * u(rng) * z, 0.9 * u(rng) * z, z);
+    g.log_scale = Eigen::Vector3d(uls(rng), uls(rng), uls(rng));
+    g.quat = Eigen::Vector4d(u(rng), u(rng), u(rng), u(rng));
+    g.opacity_logit = uo(rng);
+    gs.push_back(g);
+  }
+  return gs;
+}
+
+/// Lane l of a single-precision geometry vector set from one Gaussian.
+void set_geometry_lane(detail::GeometryLanes<detail::ProjVecF>& gl, int l, const GaussianGeometry& g) {
+  for (int k = 0; k < 3; ++k) gl.mean[k][l] = float(g.mean[k]), gl.log_scale[k][l] = float(g.log_scale[k]);
+  for (int k = 0; k < 4; ++k) gl.quat[k][l] = float(g.quat[k]);
+  gl.opacity_logit[l] = float(g.opacity_logit);
+}
+
+/// The geometry as float values, back in double (what the single-precision path sees).
+GaussianGeometry rounded(const GaussianGeometry& g) {
+  GaussianGeometry r = g;
+  for (int k = 0; k < 3; ++k) r.mean[k] = double(float(g.mean[k])), r.log_scale[k] = double(float(g.log_scale[k]));
+  for (int k = 0; k < 4; ++k) r.quat[k] = double(float(g.quat[k]));
+  r.opacity_logit = double(float(g.opacity_logit));
+  return r;
+}
+
+template <bool AA>
+void check_single_lanes() {
+  using D = detail::ProjVecF;
+  constexpr int L = detail::kProjLanesF;
+  const Camera<double> c = test_camera<double>(320, 240, 150.0, 130.0, 300.0);
+  const ProjectCamera cam = ProjectCamera::from(c);
+  const std::vector<GaussianGeometry> gs = tame_geometries(7, 64 * L);
+  std::mt19937_64 rng(9);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  int visible = 0;
+  double worst_px = 0, worst_conic = 0, worst_opacity = 0, worst_depth = 0, worst_grad = 0;
+  bool same_as_scalar = true;
+  for (std::size_t i0 = 0; i0 < gs.size(); i0 += L) {
+    detail::GeometryLanes<D> gl;
+    detail::ProjectedGradLanes<D> vl;
+    detail::GeometryGradLanes<D> gradl{};
+    ProjectedGrad v[L];
+    for (int l = 0; l < L; ++l) {
+      set_geometry_lane(gl, l, gs[i0 + std::size_t(l)]);
+      v[l] = ProjectedGrad{{u(rng), u(rng)}, {u(rng), u(rng), u(rng)}, u(rng), u(rng)};
+      for (int k = 0; k < 2; ++k) vl.mean2d[k][l] = float(v[l].mean2d[k]);
+      for (int k = 0; k < 3; ++k) vl.conic[k][l] = float(v[l].conic[k]);
+      vl.opacity[l] = float(v[l].opacity);
+      vl.depth[l] = float(v[l].depth);
+    }
+    detail::ProjectedLanes<D> pl;
+    const auto vis = detail::project_lanes<AA>(gl, cam, pl, nullptr, false);
+    CHECK(detail::lane_bits(pl.hard) == 0u);
+    const auto hard_bwd = detail::project_bwd_lanes<AA>(gl, cam, vl, gradl, false);
+    CHECK(detail::lane_bits(hard_bwd) == 0u);
+    for (int l = 0; l < L; ++l) {
+      const GaussianGeometry g = rounded(gs[i0 + std::size_t(l)]);
+      ProjectedGaussian p;
+      const bool ok = project_fwd<AA>(g, cam, p);
+      INFO("geometry ", i0 + std::size_t(l));
+      REQUIRE(ok == (vis[l] != 0));
+      // One lane of float projects to the same bits as a lane of the vector.
+      {
+        detail::GeometryLanes<float> g1;
+        for (int k = 0; k < 3; ++k) g1.mean[k] = gl.mean[k][l], g1.log_scale[k] = gl.log_scale[k][l];
+        for (int k = 0; k < 4; ++k) g1.quat[k] = gl.quat[k][l];
+        g1.opacity_logit = gl.opacity_logit[l];
+        detail::ProjectedLanes<float> p1;
+        const bool ok1 = detail::project_lanes<AA>(g1, cam, p1, nullptr, false);
+        same_as_scalar = same_as_scalar && ok1 == ok;
+        if (ok1 && ok)
+          same_as_scalar = same_as_scalar && p1.mean2d[0] == pl.mean2d[0][l] && p1.conic[1] == pl.conic[1][l] &&
+                           p1.opacity == pl.opacity[l] && p1.extent[0] == pl.extent[0][l];
+      }
+      if (!ok) continue;
+      ++visible;
+      for (int k = 0; k < 2; ++k) worst_px = std::max(worst_px, std::abs(p.mean2d[k] - double(pl.mean2d[k][l])));
+      const double cs = std::max({std::abs(p.conic[0]), std::abs(p.conic[2])});
+      for (int k = 0; k < 3; ++k) worst_conic = std::max(worst_conic, std::abs(p.conic[k] - double(pl.conic[k][l])) / cs);
+      worst_opacity = std::max(worst_opacity, std::abs(p.opacity - double(pl.opacity[l])));
+      worst_depth = std::max(worst_depth, std::abs(p.depth - double(pl.depth[l])) / p.depth);
+      // Gradients relative to the Gaussian's largest one.
+      GeometryGrad gd;
+      project_bwd<AA>(g, cam, v[l], gd);
+      double scale = 1e-30;
+      for (int k = 0; k < 3; ++k) scale = std::max({scale, std::abs(gd.mean[k]), std::abs(gd.log_scale[k])});
+      for (int k = 0; k < 4; ++k) scale = std::max(scale, std::abs(gd.quat[k]));
+      scale = std::max(scale, std::abs(gd.opacity_logit));
+      double err = std::abs(gd.opacity_logit - double(gradl.opacity_logit[l]));
+      for (int k = 0; k < 3; ++k)
+        err = std::max({err, std::abs(gd.mean[k] - double(gradl.mean[k][l])), std::abs(gd.log_scale[k] - double(gradl.log_scale[k][l]))});
+      for (int k = 0; k < 4; ++k) err = std::max(err, std::abs(gd.quat[k] - double(gradl.quat[k][l])));
+      worst_grad = std::max(worst_grad, err / scale);
+    }
+  }
+  INFO("visible ", visible, ": worst mean2d ", worst_px, " px, conic ", worst_conic, ", opacity ", worst_opacity,
+       ", depth ", worst_depth, ", gradient ", worst_grad);
+  CHECK(visible >= 200);
+  CHECK(same_as_scalar);
+  CHECK(worst_px <= 1e-3);
+  CHECK(worst_conic <= 1e-5);
+  CHECK(worst_opacity <= 1e-6);
+  CHECK(worst_depth <= 1e-6);
+  CHECK(worst_grad <= 5e-4);  // a chain of some 50 float operations
+}
+
+constexpr RasterOptions kSingleAA{.depth = true, .antialiased = true, .single_precision = true};
+constexpr RasterOptions kDoubleAA{.depth = true, .antialiased = true};
+
+}  // namespace
+
+TEST_CASE("single-precision exp and log: within 1.5 ulp of libm, the same bits per lane and one at a time") {
+  using D = detail::ProjVecF;
+  constexpr int L = detail::kProjLanesF;
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> ue(-87.0, 88.5), ul(-80.0, 80.0), u1(0.5, 300.0);
+  double worst_exp = 0, worst_log = 0;
+  bool same = true;
+  for (int it = 0; it < 50000; ++it) {
+    D x, y;
+    for (int l = 0; l < L; ++l) {
+      x[l] = float(ue(rng));
+      y[l] = (it & 1) ? float(std::exp(ul(rng))) : float(u1(rng));
+    }
+    const D e = detail::lexp(x), g = detail::llog(y);
+    for (int l = 0; l < L; ++l) {
+      worst_exp = std::max(worst_exp, ulps_f(e[l], std::exp(double(x[l]))));
+      if (y[l] != 1.0f) worst_log = std::max(worst_log, ulps_f(g[l], std::log(double(y[l]))));
+      same = same && detail::lexp(x[l]) == e[l] && detail::llog(y[l]) == g[l];
+    }
+  }
+  INFO("worst exp ", worst_exp, " ulp, worst log ", worst_log, " ulp");
+  CHECK(worst_exp <= 1.5);
+  CHECK(worst_log <= 1.0);
+  CHECK(same);
+  const float inf = std::numeric_limits<float>::infinity(), nan = std::numeric_limits<float>::quiet_NaN();
+  CHECK(detail::lexp(89.0f) == inf);
+  CHECK(detail::lexp(1e30f) == inf);
+  CHECK(detail::lexp(inf) == inf);
+  CHECK(detail::lexp(-inf) == 0.0f);
+  CHECK(detail::lexp(-1e30f) == 0.0f);
+  CHECK(std::abs(double(detail::lexp(-100.0f)) - std::exp(-100.0)) <= 0x1p-149);  // subnormal
+  CHECK(std::isnan(detail::lexp(nan)));
+  CHECK(detail::lexp(0.0f) == 1.0f);
+  CHECK(detail::llog(1.0f) == 0.0f);
+  for (float bad : {0.0f, -1.0f, 1e-40f, inf, -inf, nan}) CHECK(std::isnan(detail::llog(bad)));
+}
+
+TEST_CASE("single-precision projection lanes: within float rounding of the double projection") {
+  check_single_lanes<false>();
+  check_single_lanes<true>();
+}
+
+TEST_CASE("single-precision projection hands the hard Gaussians to double precision and leaves them alone") {
+  using D = detail::ProjVecF;
+  constexpr int L = detail::kProjLanesF;
+  const Camera<double> c = test_camera<double>(320, 240, 150.0, 130.0, 300.0);
+  const ProjectCamera cam = ProjectCamera::from(c);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  // Each case: a tame Gaussian made hard in one way. Lanes alternate hard and tame.
+  std::vector<GaussianGeometry> gs = tame_geometries(11, L);
+  auto in_front = [&](double x, double y, double z) {  // camera-space point -> world
+    const Eigen::Vector3d p(x, y, z);
+    return Eigen::Vector3d(c.R.transpose() * (p - c.t));
+  };
+  for (int l = 0; l < L; l += 2) {
+    GaussianGeometry& g = gs[std::size_t(l)];
+    g.mean = in_front(0.1, 0.1, 4.0);
+    g.log_scale = Eigen::Vector3d(-3, -3, -3);
+    g.opacity_logit = 2;
+    switch ((l / 2) % 8) {
+      case 0: g.log_scale[1] = 25.0; break;                     // scale e^25
+      case 1: g.log_scale[2] = -21.0; break;                    // scale e^-21
+      case 2: g.mean = in_front(0.0, 0.0, 3e7); break;          // beyond kMean
+      case 3: g.mean = in_front(5.0, 0.0, 0.01); break;         // depth small against |mean|
+      case 4: g.quat[2] = 1e16; break;                          // huge quaternion
+      case 5: g.mean[0] = nan; break;                           // non-finite
+      case 6: g.log_scale = Eigen::Vector3d(3, 3, 3);           // a footprint above 1e8 px^2
+              g.mean = in_front(0.0, 0.0, 0.4); break;
+      default: g.opacity_logit = nan; break;
+    }
+  }
+  detail::GeometryLanes<D> gl;
+  for (int l = 0; l < L; ++l) set_geometry_lane(gl, l, gs[std::size_t(l)]);
+  detail::ProjectedLanes<D> pl;
+  const auto vis = detail::project_lanes<false>(gl, cam, pl, nullptr, false);
+  detail::ProjectedGradLanes<D> vl{};
+  for (int l = 0; l < L; ++l) vl.mean2d[0][l] = 1.0f, vl.conic[0][l] = 1.0f, vl.opacity[l] = 1.0f;
+  detail::GeometryGradLanes<D> gradl{};
+  const auto hard_bwd = detail::project_bwd_lanes<false>(gl, cam, vl, gradl, false);
+  for (int l = 0; l < L; ++l) {
+    INFO("lane ", l);
+    const bool hard = (l % 2 == 0);
+    CHECK((pl.hard[l] != 0) == hard);
+    CHECK((hard_bwd[l] != 0) == hard);
+    if (hard) {
+      CHECK(vis[l] == 0);
+      CHECK(gradl.mean[0][l] == 0.0f);  // untouched: the double-precision pass writes these
+      CHECK(gradl.opacity_logit[l] == 0.0f);
+    }
+  }
+  // The footprint case is on screen in double precision (what it is handed to).
+  ProjectedGaussian p;
+  CHECK(project_fwd<false>(rounded(gs[12]), cam, p));
+  CHECK(std::max(p.conic[0], p.conic[2]) < 1e-8);
+}
+
+TEST_CASE_TEMPLATE("single-precision rasteriser against the reference renderer", G, Gaussian<1, 3>, Gaussian<3, 3>,
+                   Gaussian<7, 3>) {
+  SceneParams sp;
+  sp.n = 400;
+  const Camera<float> cam = test_camera<float>(70, 45, 41.0, 12.0, 55.0);
+  const GaussianModel<G, float> model = random_scene<G, float>(cam, sp, 21);
+  Rasterizer<G, float, kSingleAA> fast;
+  RenderSettings<float> rs;
+  rs.background = {0.2f};
+  fast.forward(model, cam, rs);
+  ReferenceSettings ref_rs;
+  ref_rs.background = {0.2};
+  ref_rs.depth = true;
+  ref_rs.antialiased = true;
+  const ReferenceResult<double> ref = reference_render<double>(model, cam, ref_rs);
+  CHECK(max_abs_diff(fast.image().data, ref.image.data) <= 1e-5);
+  CHECK(max_abs_diff(fast.alpha().data, ref.alpha.data) <= 1e-5);
+  CHECK(max_abs_diff(fast.depth().data, ref.depth.data) <= 1e-5 * sp.z_max);
+  CHECK(fast.fragments() == ref.fragments);
+}
+
+TEST_CASE("single-precision backward agrees with the double-precision one on a crowded scene") {
+  using G = Gaussian<7, 3>;
+  const Camera<float> cam = test_camera<float>(96, 64, 30.0, 40.0, 80.0);
+  SceneParams sp;
+  sp.n = 2000;
+  sp.log_scale_max = std::log(0.3);
+  sp.opacity_max = 0.99;
+  const GaussianModel<G, float> m = random_scene<G, float>(cam, sp, 5);
+  RenderSettings<float> rs;
+  rs.band_first = 4;
+  rs.band_count = 1;
+  Rasterizer<G, float, kSingleAA> rs_single;
+  Rasterizer<G, float, kDoubleAA> rs_double;
+  rs_single.forward(m, cam, rs);
+  rs_double.forward(m, cam, rs);
+  CHECK(max_abs_diff(rs_single.image().data, rs_double.image().data) <= 1e-5);
+  std::mt19937_64 rng(1);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  Image<float> wi(cam.width, cam.height, 1), wa(cam.width, cam.height, 1), wd(cam.width, cam.height, 1);
+  for (auto* img : {&wi, &wa, &wd})
+    for (float& v : img->data) v = u(rng);
+  Gradients<G, float> gs, gd;
+  rs_single.backward(wi, &wa, &wd, gs);
+  rs_double.backward(wi, &wa, &wd, gd);
+  auto rel = [](const std::vector<float>& a, const std::vector<float>& b) {
+    double scale = 0, diff = 0;
+    for (std::size_t k = 0; k < a.size(); ++k) {
+      scale = std::max(scale, std::abs(double(b[k])));
+      diff = std::max(diff, std::abs(double(a[k]) - double(b[k])));
+    }
+    return scale > 0 ? diff / scale : diff;
+  };
+  CHECK(rel(gs.model.means, gd.model.means) < 1e-4);
+  CHECK(rel(gs.model.log_scales, gd.model.log_scales) < 1e-4);
+  CHECK(rel(gs.model.quats, gd.model.quats) < 1e-4);
+  CHECK(rel(gs.model.opacity_logits, gd.model.opacity_logits) < 1e-4);
+  CHECK(rel(gs.model.sh, gd.model.sh) < 1e-4);
+  CHECK(rel(gs.mean2d, gd.mean2d) < 1e-4);
+}
