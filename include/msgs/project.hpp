@@ -3,7 +3,9 @@
 // 3DGS/gsplat conventions) and its analytic backward, side by side. Internally double precision,
 // which keeps extreme scales finite; the rasteriser projects a vector register's worth of
 // Gaussians at once (detail::project_lanes), the public project_fwd / project_bwd one at a time,
-// both to the same bits.
+// both to the same bits. The same code in single precision (lane types float and ProjVecF, twice
+// the lanes) serves RasterOptions::single_precision, which hands the Gaussians beyond
+// ProjectPrecisionLimits to the double-precision projection.
 #pragma once
 
 #include <Eigen/Core>
@@ -115,8 +117,10 @@ namespace detail {
 //
 // Every function below is written once for a lane type D: double (one Gaussian) or ProjVec (a
 // vector of kProjLanes doubles, as many Gaussians at once: 8 with AVX-512, 4 with AVX, 2 with
-// SSE2). Lane by lane both compute the same IEEE operations (exp and log included: lexp, llog), so
-// a Gaussian projects to the same bits either way (tested). Culling becomes a lane mask; the
+// SSE2), or in single precision float (one Gaussian) or ProjVecF (kProjLanesF floats); constants
+// and camera values enter in the lane's precision (T(x)), which changes nothing in double. Lane by
+// lane the scalar and vector forms of a precision compute the same IEEE operations (exp and log
+// included: lexp, llog), so a Gaussian projects to the same bits either way (tested). Culling becomes a lane mask; the
 // scalar form returns as soon as its one lane is culled, the vector form when all are. Culled
 // lanes of a vector compute on (possibly non-finite) garbage that is masked out.
 
