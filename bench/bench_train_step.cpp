@@ -13,7 +13,9 @@
 // measured in this binary at the case's thread count) and bound_ratio = measured seconds per step /
 // (bytes_per_step / triad bandwidth): 1 would be a step running at the memory bound.
 // bound_ratio_visible is the same for the Gaussians the view saw only (the bound of a step that
-// touches only those).
+// touches only those). forward_ms, loss_ms, backward_ms (with the regulariser), adam_ms and
+// stats_ms split the step into its stages (milliseconds per step); project_ms, bin_ms and blend_ms
+// split the forward, blend_backward_ms and gaussians_backward_ms the backward.
 //
 //   ./build/bench/bench_train_step
 //   ./build/bench/bench_train_step --benchmark_filter='100k_640x480' --benchmark_min_time=0.2
@@ -159,6 +161,11 @@ struct StepBench {
   SsimWorkspace<float> ws;
   long long step_index = 1000;  // a step inside the densification window, a multiple of 10 first
   double loss = 0, psnr_value = 0;
+  /// Seconds spent in each stage since the last reset: rasteriser forward, loss, rasteriser
+  /// backward and the regulariser, Adam, density statistics.
+  struct Stages {
+    double forward = 0, loss = 0, backward = 0, adam = 0, stats = 0;
+  } stages;
 
   /// The density control of the default (MSAD) configuration with refine_stop pushed out, so the
   /// statistics accumulate at every benchmarked step; one accumulator per model channel.
@@ -182,23 +189,38 @@ struct StepBench {
   /// Forward, loss, backward, Adam, density statistics: Trainer::train's steps 2 to 6 without the
   /// strategy hooks (the mask is AdamMask::band, what the default hooks leave) and without refinement.
   void step() {
+    using clock = std::chrono::steady_clock;
+    const auto seconds = [](clock::time_point a, clock::time_point b) {
+      return std::chrono::duration<double>(b - a).count();
+    };
+    const auto t0 = clock::now();
     RenderSettings<float> rs;
     rs.band_first = first;
     rs.band_count = count;
     rs.sh_degree = G::sh_degree;
     rs.background = random_background<float>(step_index, count, 0);
     const Image<float>& render = raster.forward(model, cam, rs);
+    const auto t1 = clock::now();
     loss = photometric_loss(render, gt, &d_image, ws, PhotometricLossConfig{});
     psnr_value = psnr(render, gt);
+    const auto t2 = clock::now();
     const std::vector<std::uint32_t>& seen = raster.visible();
     const std::vector<std::uint32_t>* rows = sparse ? &seen : nullptr;
     raster.backward(d_image, nullptr, nullptr, grads, sparse ? GradientFill::visible : GradientFill::dense);
     if (step_index % 10 == 0)  // TrainOptions::scale_reg_every
       scale_reg<float>(std::span<const float>(model.log_scales), std::span<float>(grads.model.log_scales),
                        ScaleRegConfig{}, rows);
+    const auto t3 = clock::now();
     adam.step(model, grads.model, AdamMask::band(first, count), rows);
+    const auto t4 = clock::now();
     if (density.accumulates_at(step_index))
       density.observe_gradients(step_index, first, grads, raster.radii(), cam.width, cam.height, &seen);
+    const auto t5 = clock::now();
+    stages.forward += seconds(t0, t1);
+    stages.loss += seconds(t1, t2);
+    stages.backward += seconds(t2, t3);
+    stages.adam += seconds(t3, t4);
+    stages.stats += seconds(t4, t5);
     ++step_index;
   }
 
@@ -216,6 +238,8 @@ void bm_train_step(benchmark::State& st, int size, bool half, int threads, int f
   const SceneSpec spec = spec_of(size);
   StepBench<G> b(spec, half, first, count, sparse);
   b.step();  // allocate the rasteriser, loss and gradient buffers before timing
+  b.stages = {};
+  b.raster.timings().reset();
   const auto t0 = std::chrono::steady_clock::now();
   for (auto _ : st) {
     b.step();
@@ -236,6 +260,18 @@ void bm_train_step(benchmark::State& st, int size, bool half, int threads, int f
   k["triad_GBps"] = gbps;
   k["bound_ratio"] = seconds / (bytes / (gbps * 1e9));
   k["bound_ratio_visible"] = seconds / (bytes_visible / (gbps * 1e9));
+  const double per_step_ms = 1e3 / double(std::max<benchmark::IterationCount>(st.iterations(), 1));
+  k["forward_ms"] = b.stages.forward * per_step_ms;
+  k["loss_ms"] = b.stages.loss * per_step_ms;
+  k["backward_ms"] = b.stages.backward * per_step_ms;
+  k["adam_ms"] = b.stages.adam * per_step_ms;
+  k["stats_ms"] = b.stages.stats * per_step_ms;
+  const RasterTimings& rt = b.raster.timings();  // the rasteriser's own split of forward and backward
+  k["project_ms"] = rt.project * per_step_ms;
+  k["bin_ms"] = rt.bin * per_step_ms;
+  k["blend_ms"] = rt.blend * per_step_ms;
+  k["blend_backward_ms"] = rt.blend_backward * per_step_ms;
+  k["gaussians_backward_ms"] = rt.project_backward * per_step_ms;
 }
 
 void tune(benchmark::internal::Benchmark* b, int size) {
