@@ -301,3 +301,60 @@ TEST_CASE("single-precision backward agrees with the double-precision one on a c
   CHECK(rel(gs.model.sh, gd.model.sh) < 1e-4);
   CHECK(rel(gs.mean2d, gd.mean2d) < 1e-4);
 }
+
+TEST_CASE_TEMPLATE("transpose_square turns an L x L block of vector lanes around", D, detail::ProjVecF, detail::ProjVec) {
+  constexpr int L = detail::Lanes<D>::kCount;
+  D r[L];
+  for (int i = 0; i < L; ++i)
+    for (int j = 0; j < L; ++j) r[i][j] = typename detail::Lanes<D>::T(100 * i + j);
+  detail::transpose_square(r);
+  for (int i = 0; i < L; ++i)
+    for (int j = 0; j < L; ++j) CHECK(r[i][j] == typename detail::Lanes<D>::T(100 * j + i));
+}
+
+TEST_CASE("single-precision colour rows move as transposed blocks at every SH degree") {
+  // The single-precision path gathers and scatters SH rows as whole vectors (an L x L transpose)
+  // and writes zeros above the active degree; the double-precision path copies value by value.
+  using G = Gaussian<3, 3>;
+  const Camera<float> cam = test_camera<float>(80, 56, 36.0, 30.0, 60.0);
+  SceneParams sp;
+  sp.n = 700;  // not a multiple of 16: the last batch has padded lanes
+  const GaussianModel<G, float> m = random_scene<G, float>(cam, sp, 9);
+  for (int deg = 0; deg <= 3; ++deg) {
+    CAPTURE(deg);
+    RenderSettings<float> rs;
+    rs.band_first = 1;
+    rs.band_count = 2;
+    rs.sh_degree = deg;
+    Rasterizer<G, float, kSingleAA> rs_single;
+    Rasterizer<G, float, kDoubleAA> rs_double;
+    rs_single.forward(m, cam, rs);
+    rs_double.forward(m, cam, rs);
+    CHECK(max_abs_diff(rs_single.image().data, rs_double.image().data) <= 1e-5);
+    Image<float> wi(cam.width, cam.height, 2);
+    std::mt19937_64 rng(3);
+    std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+    for (float& v : wi.data) v = u(rng);
+    Gradients<G, float> gs, gd;
+    rs_single.backward(wi, nullptr, nullptr, gs);
+    rs_double.backward(wi, nullptr, nullptr, gd);
+    const int K = sh_coeffs_for_degree(deg);
+    double scale = 0, diff = 0;
+    bool zero_above = true, untouched = true;
+    for (std::size_t i = 0; i < m.size(); ++i)
+      for (int ch = 0; ch < G::bands; ++ch)
+        for (int k = 0; k < G::sh_coeffs; ++k) {
+          const float a = gs.model.sh_row(i, ch)[k], b = gd.model.sh_row(i, ch)[k];
+          if (ch < 1 || ch > 2) untouched = untouched && a == 0.0f && !std::signbit(a);
+          else if (k >= K) zero_above = zero_above && a == 0.0f && !std::signbit(a);
+          else {
+            scale = std::max(scale, std::abs(double(b)));
+            diff = std::max(diff, std::abs(double(a) - double(b)));
+          }
+        }
+    CHECK(zero_above);
+    CHECK(untouched);
+    CHECK(scale > 0);
+    CHECK(diff <= 1e-4 * scale);
+  }
+}

@@ -233,6 +233,29 @@ inline void set_lane(D& x, int l, typename Lanes<D>::T v) {
   else x[l] = v;
 }
 
+/// Transpose an L x L block held as L vectors of L lanes (r[i] lane j becomes r[j] lane i), for
+/// vector lane types (L a power of two): log2(L) rounds of two-vector lane shuffles, round B
+/// swapping the off-diagonal B x B blocks of every 2B x 2B block. Moves bits only. For 16 floats
+/// that is 64 shuffles where lane-by-lane copies take 256 loads and 256 stores.
+template <class D, int B = Lanes<D>::kCount / 2>
+inline void transpose_square(D* r) {
+  constexpr int L = Lanes<D>::kCount;
+  static_assert(L > 1 && (L & (L - 1)) == 0 && B >= 1, "transpose_square: vector lanes, a power of two");
+  using I = typename Lanes<D>::M;  // integer lanes as wide as D's: the shuffle's index type
+  I lo, hi;
+  for (int j = 0; j < L; ++j) {  // lanes j with bit B set come from the partner vector
+    lo[j] = (j & B) ? L + j - B : j;
+    hi[j] = (j & B) ? L + j : j + B;
+  }
+  for (int i = 0; i < L; ++i)
+    if (!(i & B)) {
+      const D a = r[i], c = r[i + B];
+      r[i] = __builtin_shuffle(a, c, lo);
+      r[i + B] = __builtin_shuffle(a, c, hi);
+    }
+  if constexpr (B > 1) transpose_square<D, B / 2>(r);
+}
+
 /// Logical and / or of masks: && and || for one lane, & and | for vector masks.
 template <class M>
 inline M mand(const M& a, const M& b) {

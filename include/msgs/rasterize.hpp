@@ -503,19 +503,35 @@ class Rasterizer {
   /// SH coefficients of the rendered channels of a vector of Gaussians (lane type D),
   /// lane-minor ([channel, coefficient, lane]) so that a coefficient of all lanes is one vector
   /// load; gathered from and scattered to the band planes one Gaussian's contiguous row at a time.
+  /// Where the lanes hold the model's scalar and a row is a whole number of vectors (single
+  /// precision with SH degree 3 and 16 or 8 lanes: the training step), rows move as vectors
+  /// and an L x L block transpose turns them around; otherwise one value at a time.
   template <class D>
   struct ShLanes {
     using T = typename detail::Lanes<D>::T;
     static constexpr int L = detail::Lanes<D>::kCount;
+    static constexpr bool kBlocks = std::is_same_v<T, S> && L > 1 && G::sh_coeffs % L == 0;
     alignas(64) T v[kBands][G::sh_coeffs][L];
 
+    /// Every lane's id must be a Gaussian of `m` (lanes past a batch's end repeat its first).
     template <class M>
     void gather(const M& m, const std::uint32_t* ids, int first, int count, int K) {
-      for (int ch = 0; ch < count; ++ch)
-        for (int l = 0; l < L; ++l) {
-          const S* row = m.sh_row(ids[l], first + ch);
-          for (int k = 0; k < K; ++k) v[ch][k][l] = T(row[k]);
-        }
+      if constexpr (kBlocks) {
+        // Whole blocks of L coefficients: the ones from K on come along and are never read.
+        for (int ch = 0; ch < count; ++ch)
+          for (int k0 = 0; k0 < K; k0 += L) {
+            D r[L];
+            for (int l = 0; l < L; ++l) std::memcpy(&r[l], m.sh_row(ids[l], first + ch) + k0, sizeof(D));
+            detail::transpose_square(r);
+            for (int k = 0; k < L; ++k) store(ch, k0 + k, r[k]);
+          }
+      } else {
+        for (int ch = 0; ch < count; ++ch)
+          for (int l = 0; l < L; ++l) {
+            const S* row = m.sh_row(ids[l], first + ch);
+            for (int k = 0; k < K; ++k) v[ch][k][l] = T(row[k]);
+          }
+      }
     }
     D load(int ch, int k) const {
       D d;
@@ -527,13 +543,24 @@ class Rasterizer {
     /// whose bit is set in `skip` are left out.
     template <class M>
     void scatter(M& g, const std::uint32_t* ids, int n, std::uint32_t skip, int first, int count, int K) const {
-      for (int ch = 0; ch < count; ++ch)
-        for (int l = 0; l < n; ++l) {
-          if (skip >> l & 1u) continue;
-          S* row = g.sh_row(ids[l], first + ch);
-          for (int k = 0; k < K; ++k) row[k] = S(v[ch][k][l]);
-          for (int k = K; k < G::sh_coeffs; ++k) row[k] = S(0);
-        }
+      if constexpr (kBlocks) {
+        for (int ch = 0; ch < count; ++ch)
+          for (int k0 = 0; k0 < G::sh_coeffs; k0 += L) {
+            D r[L];
+            for (int k = 0; k < L; ++k) r[k] = k0 + k < K ? load(ch, k0 + k) : D{};
+            detail::transpose_square(r);
+            for (int l = 0; l < n; ++l)
+              if (!(skip >> l & 1u)) std::memcpy(g.sh_row(ids[l], first + ch) + k0, &r[l], sizeof(D));
+          }
+      } else {
+        for (int ch = 0; ch < count; ++ch)
+          for (int l = 0; l < n; ++l) {
+            if (skip >> l & 1u) continue;
+            S* row = g.sh_row(ids[l], first + ch);
+            for (int k = 0; k < K; ++k) row[k] = S(v[ch][k][l]);
+            for (int k = K; k < G::sh_coeffs; ++k) row[k] = S(0);
+          }
+      }
     }
   };
 
