@@ -28,6 +28,7 @@
 #include <msgs/loss.hpp>
 #include <msgs/rasterize.hpp>
 #include <msgs/schedule.hpp>
+#include <msgs/step_rows.hpp>
 
 #include "scene_family.hpp"
 
@@ -205,13 +206,14 @@ struct StepBench {
     psnr_value = psnr(render, gt);
     const auto t2 = clock::now();
     const std::vector<std::uint32_t>& seen = raster.visible();
-    const std::vector<std::uint32_t>* rows = sparse ? &seen : nullptr;
-    raster.backward(d_image, nullptr, nullptr, grads, sparse ? GradientFill::visible : GradientFill::dense);
-    if (step_index % 10 == 0)  // TrainOptions::scale_reg_every
+    const bool reg_step = step_index % 10 == 0;  // TrainOptions::scale_reg_every
+    const StepRows sr = StepRows::of(sparse, reg_step, seen);
+    raster.backward(d_image, nullptr, nullptr, grads, sr.fill);
+    if (reg_step)
       scale_reg<float>(std::span<const float>(model.log_scales), std::span<float>(grads.model.log_scales),
-                       ScaleRegConfig{}, rows);
+                       ScaleRegConfig{}, sr.reg_rows);
     const auto t3 = clock::now();
-    adam.step(model, grads.model, AdamMask::band(first, count), rows);
+    adam.step(model, grads.model, AdamMask::band(first, count), sr.rows, sr.adam);
     const auto t4 = clock::now();
     if (density.accumulates_at(step_index))
       density.observe_gradients(step_index, first, grads, raster.radii(), cam.width, cam.height, &seen);
