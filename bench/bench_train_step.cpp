@@ -28,7 +28,6 @@
 #include <msgs/loss.hpp>
 #include <msgs/rasterize.hpp>
 #include <msgs/schedule.hpp>
-#include <msgs/step_rows.hpp>
 
 #include "scene_family.hpp"
 
@@ -206,14 +205,13 @@ struct StepBench {
     psnr_value = psnr(render, gt);
     const auto t2 = clock::now();
     const std::vector<std::uint32_t>& seen = raster.visible();
-    const bool reg_step = step_index % 10 == 0;  // TrainOptions::scale_reg_every
-    const StepRows sr = StepRows::of(sparse, reg_step, seen);
-    raster.backward(d_image, nullptr, nullptr, grads, sr.fill);
-    if (reg_step)
+    const std::vector<std::uint32_t>* rows = sparse ? &seen : nullptr;
+    raster.backward(d_image, nullptr, nullptr, grads, sparse ? GradientFill::visible : GradientFill::dense);
+    if (step_index % 10 == 0)  // TrainOptions::scale_reg_every
       scale_reg<float>(std::span<const float>(model.log_scales), std::span<float>(grads.model.log_scales),
-                       ScaleRegConfig{}, sr.reg_rows);
+                       ScaleRegConfig{}, rows);
     const auto t3 = clock::now();
-    adam.step(model, grads.model, AdamMask::band(first, count), sr.rows, sr.adam);
+    adam.step(model, grads.model, AdamMask::band(first, count), rows);
     const auto t4 = clock::now();
     if (density.accumulates_at(step_index))
       density.observe_gradients(step_index, first, grads, raster.radii(), cam.width, cam.height, &seen);

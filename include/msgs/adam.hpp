@@ -78,12 +78,6 @@ struct AdamMask {
 ///
 /// The position learning rate follows lr(t) = lr0 (lr1 / lr0)^(t / T), t = `iteration` (the number of
 /// `step` calls so far, i.e. the training step, whether or not the means were updated), clamped at T.
-/// How Adam::step reads a row list. `only`: the listed rows are updated and no other (sparse
-/// Adam). `zero_elsewhere`: every row is updated, the listed rows with their gradient and every
-/// other row with a gradient of exactly zero, which is not read: the dense update to the bit,
-/// without a gradient buffer whose unseen rows were zeroed (GradientFill::visible).
-enum class AdamRows { only, zero_elsewhere };
-
 template <class G, class S = float>
 class Adam {
  public:
@@ -125,12 +119,9 @@ class Adam {
   /// indices updates those rows only and reads `grad` only there (sparse or "selective" Adam, as
   /// Taming 3DGS and gsplat's sparse gradients: unseen Gaussians and their moments stay exactly as
   /// they are); the trainer passes the Gaussians the view saw, so the step costs what they cost.
-  /// With `how = AdamRows::zero_elsewhere` the list says instead which rows of `grad` hold a
-  /// gradient: the update is the dense one, every other row taken as a zero gradient without
-  /// reading it (same bits as dense Adam over a gradient zeroed there).
   /// The step counters advance per group either way.
   void step(GaussianModel<G, S>& params, const GaussianModel<G, S>& grad, const AdamMask& mask = {},
-            const std::vector<std::uint32_t>* rows = nullptr, AdamRows how = AdamRows::only) {
+            const std::vector<std::uint32_t>* rows = nullptr) {
     check_sizes(params, grad);
     int first = mask.sh_first, count = mask.sh_count < 0 ? G::bands - mask.sh_first : mask.sh_count;
     if (mask.sh && (first < 0 || count < 0 || first + count > G::bands))
@@ -142,28 +133,20 @@ class Adam {
         if ((*rows)[j] >= params.size() || (j > 0 && (*rows)[j] <= (*rows)[j - 1]))
           throw std::invalid_argument("Adam::step: rows must be ascending indices below " + std::to_string(params.size()));
     const std::int64_t t = iteration++;
-    const Rows r{rows, rows && how == AdamRows::zero_elsewhere};
     if (mask.means)
-      update_group<3>(params.means, grad.means, exp_avg.means, exp_avg_sq.means, lr_means_at(t), ++steps.means, r);
+      update_group<3>(params.means, grad.means, exp_avg.means, exp_avg_sq.means, lr_means_at(t), ++steps.means, rows);
     if (mask.scales)
       update_group<3>(params.log_scales, grad.log_scales, exp_avg.log_scales, exp_avg_sq.log_scales, config.lr_scales,
-                      ++steps.scales, r);
+                      ++steps.scales, rows);
     if (mask.quats)
-      update_group<4>(params.quats, grad.quats, exp_avg.quats, exp_avg_sq.quats, config.lr_quats, ++steps.quats, r);
+      update_group<4>(params.quats, grad.quats, exp_avg.quats, exp_avg_sq.quats, config.lr_quats, ++steps.quats, rows);
     if (mask.opacities)
       update_group<1>(params.opacity_logits, grad.opacity_logits, exp_avg.opacity_logits, exp_avg_sq.opacity_logits,
-                      config.lr_opacities, ++steps.opacities, r);
-    if (mask.sh && count > 0) update_sh(params, grad, first, count, r);
+                      config.lr_opacities, ++steps.opacities, rows);
+    if (mask.sh && count > 0) update_sh(params, grad, first, count, rows);
   }
 
  private:
-  /// The rows a step visits: every row (list nullptr), the listed ones, or every row with the
-  /// listed ones' gradients and zero for the rest (`zero_elsewhere`).
-  struct Rows {
-    const std::vector<std::uint32_t>* list = nullptr;
-    bool zero_elsewhere = false;
-  };
-
   struct Coeffs {
     S step_size;     // lr / (1 - beta1^t)
     S inv_bc2_sqrt;  // 1 / sqrt(1 - beta2^t)
@@ -186,15 +169,12 @@ class Adam {
 
   /// The torch.optim.Adam element update (lerp form of the first moment) over `n` consecutive
   /// values. Restrict pointers let the compiler vectorise it (given -fno-math-errno for the square
-  /// root); every value is independent, so vector and scalar code give the same bits. `Zero`: the
-  /// gradient is +0 throughout and `g` is not read (the same expression, so the same bits).
-  template <bool Zero>
+  /// root); every value is independent, so vector and scalar code give the same bits.
   static void update_run(S* __restrict p, S* __restrict m, S* __restrict v, const S* __restrict g, std::size_t n,
                          const Betas b, const Coeffs k) {
     for (std::size_t a = 0; a < n; ++a) {
-      const S ga = Zero ? S(0) : g[a];
-      const S ma = m[a] + b.b1c * (ga - m[a]);
-      const S va = b.b2 * v[a] + b.b2c * ga * ga;
+      const S ma = m[a] + b.b1c * (g[a] - m[a]);
+      const S va = b.b2 * v[a] + b.b2c * g[a] * g[a];
       m[a] = ma;
       v[a] = va;
       p[a] -= k.step_size * ma / (std::sqrt(va) * k.inv_bc2_sqrt + b.eps);
@@ -203,90 +183,64 @@ class Adam {
 
   /// The same over `rows` consecutive rows of K values with per-coefficient step sizes (the SH
   /// DC coefficient has its own learning rate); the fixed inner length vectorises.
-  template <int K, bool Zero>
+  template <int K>
   static void update_rows(S* __restrict p, S* __restrict m, S* __restrict v, const S* __restrict g, std::size_t rows,
                           const Betas b, const S* __restrict step_size, const S* __restrict inv_bc2_sqrt) {
-    for (std::size_t r = 0; r < rows; ++r, p += K, m += K, v += K) {
+    for (std::size_t r = 0; r < rows; ++r, p += K, m += K, v += K, g += K)
       for (int a = 0; a < K; ++a) {
-        const S ga = Zero ? S(0) : g[a];
-        const S ma = m[a] + b.b1c * (ga - m[a]);
-        const S va = b.b2 * v[a] + b.b2c * ga * ga;
+        const S ma = m[a] + b.b1c * (g[a] - m[a]);
+        const S va = b.b2 * v[a] + b.b2c * g[a] * g[a];
         m[a] = ma;
         v[a] = va;
         p[a] -= step_size[a] * ma / (std::sqrt(va) * inv_bc2_sqrt[a] + b.eps);
       }
-      if constexpr (!Zero) g += K;
-    }
   }
 
-  /// Call f.template operator()<Zero>(first_row, row_count) for runs of consecutive rows, in
-  /// parallel over fixed chunks: every row [0, n) (Zero false); the listed rows (ascending), in
-  /// chunks of the list, so consecutive visible Gaussians form long runs that vectorise like the
-  /// dense update; or, with `zero_elsewhere`, every row in chunks of rows, the listed runs with
-  /// Zero false and the gaps between them with Zero true.
+  /// Call f(first_row, row_count) for runs of consecutive rows: every row [0, n), or the listed
+  /// ones (ascending), in parallel over fixed chunks of the list (consecutive visible Gaussians
+  /// then form long runs, which vectorise like the dense update).
   template <class F>
-  static void for_each_run(std::size_t n, const Rows& rows, F&& f) {
+  static void for_each_run(std::size_t n, const std::vector<std::uint32_t>* rows, F&& f) {
     constexpr std::ptrdiff_t kChunk = 2048;
-    const std::vector<std::uint32_t>* list = rows.list;
-    const bool by_list = list && !rows.zero_elsewhere;
-    const std::ptrdiff_t total = static_cast<std::ptrdiff_t>(by_list ? list->size() : n);
+    const std::ptrdiff_t total = static_cast<std::ptrdiff_t>(rows ? rows->size() : n);
     const std::ptrdiff_t chunks = (total + kChunk - 1) / kChunk;
 #pragma omp parallel for schedule(static)
     for (std::ptrdiff_t c = 0; c < chunks; ++c) {
-      const std::ptrdiff_t j0 = c * kChunk, j1 = std::min(total, (c + 1) * kChunk);
-      if (!list) {
-        f.template operator()<false>(std::size_t(j0), std::size_t(j1 - j0));
+      const std::ptrdiff_t j1 = std::min(total, (c + 1) * kChunk);
+      if (!rows) {
+        f(std::size_t(c * kChunk), std::size_t(j1 - c * kChunk));
         continue;
       }
-      const std::uint32_t* r = list->data();
-      if (by_list) {
-        for (std::ptrdiff_t j = j0; j < j1;) {
-          std::ptrdiff_t e = j + 1;
-          while (e < j1 && r[e] == r[e - 1] + 1) ++e;
-          f.template operator()<false>(std::size_t(r[j]), std::size_t(e - j));
-          j = e;
-        }
-        continue;
-      }
-      // Rows [j0, j1): listed runs and the gaps around them.
-      const std::uint32_t* end = r + list->size();
-      const std::uint32_t* q = std::lower_bound(r, end, std::uint32_t(j0));
-      for (std::ptrdiff_t i = j0; i < j1;) {
-        const std::ptrdiff_t next = q < end ? std::min<std::ptrdiff_t>(j1, std::ptrdiff_t(*q)) : j1;
-        if (next > i) {
-          f.template operator()<true>(std::size_t(i), std::size_t(next - i));
-          i = next;
-          continue;
-        }
-        std::ptrdiff_t e = i + 1;
-        ++q;
-        while (e < j1 && q < end && std::ptrdiff_t(*q) == e) ++e, ++q;
-        f.template operator()<false>(std::size_t(i), std::size_t(e - i));
-        i = e;
+      const std::uint32_t* r = rows->data();
+      for (std::ptrdiff_t j = c * kChunk; j < j1;) {
+        std::ptrdiff_t e = j + 1;
+        while (e < j1 && r[e] == r[e - 1] + 1) ++e;
+        f(std::size_t(r[j]), std::size_t(e - j));
+        j = e;
       }
     }
   }
 
-  /// Update `W` consecutive values per row over `rows` (see for_each_run).
+  /// Update `W` consecutive values per row: every row, or the listed ones.
   template <int W>
   void update_group(std::vector<S>& p, const std::vector<S>& g, std::vector<S>& m, std::vector<S>& v, double lr,
-                    std::int64_t t, const Rows& rows) const {
+                    std::int64_t t, const std::vector<std::uint32_t>* rows) const {
     const Coeffs k = coeffs(lr, t);
     const Betas b = betas();
     S* pp = p.data();
     S* mp = m.data();
     S* vp = v.data();
     const S* gp = g.data();
-    for_each_run(p.size() / W, rows, [&]<bool Zero>(std::size_t row, std::size_t count) {
+    for_each_run(p.size() / W, rows, [&](std::size_t row, std::size_t count) {
       const std::size_t o = row * W;
-      update_run<Zero>(pp + o, mp + o, vp + o, gp + o, count * W, b, k);
+      update_run(pp + o, mp + o, vp + o, gp + o, count * W, b, k);
     });
   }
 
   /// SH of channels [first, first + count): one band plane at a time, the DC coefficient with its
   /// own learning rate.
   void update_sh(GaussianModel<G, S>& params, const GaussianModel<G, S>& grad, int first, int count,
-                 const Rows& rows) {
+                 const std::vector<std::uint32_t>* rows) {
     constexpr int K = G::sh_coeffs;
     const Betas b = betas();
     const std::size_t stride = params.sh_plane_stride();
@@ -303,9 +257,9 @@ class Adam {
       const S* g = grad.sh.data() + off;
       S* m = exp_avg.sh.data() + off;
       S* v = exp_avg_sq.sh.data() + off;
-      for_each_run(params.size(), rows, [&]<bool Zero>(std::size_t row, std::size_t n) {
+      for_each_run(params.size(), rows, [&](std::size_t row, std::size_t n) {
         const std::size_t o = row * K;
-        update_rows<K, Zero>(p + o, m + o, v + o, g + o, n, b, step_size.data(), inv.data());
+        update_rows<K>(p + o, m + o, v + o, g + o, n, b, step_size.data(), inv.data());
       });
     }
   }

@@ -29,7 +29,6 @@
 #include "rasterize.hpp"
 #include "schedule.hpp"
 #include "sh.hpp"
-#include "step_rows.hpp"
 #include "strategy.hpp"
 
 namespace msgs {
@@ -444,14 +443,13 @@ class Trainer {
       // only, taken here since nothing else reads them), then the rasteriser.
       if (opt_.exposure) exposure_.backward_and_step(frame, render, d_image);
       if (opt_.clamp_render) clamp01_backward(raw, d_image);
-      const bool reg_step = opt_.scale_reg_every > 0 && step % opt_.scale_reg_every == 0;
       const std::vector<std::uint32_t>& seen = raster.visible();
-      const StepRows sr = StepRows::of(opt_.sparse, reg_step, seen);
-      raster.backward(d_image, nullptr, nullptr, grads, sr.fill);
-      if (opt_.check_finite) check_finite_gradients(step, grads, sr.rows);
-      if (reg_step)
+      const std::vector<std::uint32_t>* rows = opt_.sparse ? &seen : nullptr;
+      raster.backward(d_image, nullptr, nullptr, grads, opt_.sparse ? GradientFill::visible : GradientFill::dense);
+      if (opt_.check_finite) check_finite_gradients(step, grads, rows);
+      if (opt_.scale_reg_every > 0 && step % opt_.scale_reg_every == 0)
         scale_reg<float>(std::span<const float>(model_.log_scales), std::span<float>(grads.model.log_scales),
-                         opt_.scale_reg, sr.reg_rows);
+                         opt_.scale_reg, rows);
       auto t4 = clock::now();
       times_.project += raster.timings().project;
       times_.bin += raster.timings().bin;
@@ -468,7 +466,7 @@ class Trainer {
       ctx.spectral = band.spectral;
       ctx.mask = AdamMask::band(band.first_channel, band.channels);
       hooks_.pre_backward(plan_, ctx);
-      adam_.step(model_, grads.model, ctx.mask, sr.rows, sr.adam);
+      adam_.step(model_, grads.model, ctx.mask, rows);
       auto t5 = clock::now();
       times_.adam += seconds(t4, t5);
 
