@@ -181,9 +181,9 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
   }
   detail::radix_sort_by_key(sc.keys, sc.pos, int(sizeof(S)), sc.keys2, sc.pos2, sc.hist);
   // The order and the tile rectangles in that order, gathered once so that the two passes below
-  // read them sequentially.
-  // In depth order the ids jump over the whole model: the rectangle a few iterations ahead is
-  // prefetched (at a million Gaussians nearly every read would otherwise miss the cache).
+  // read them sequentially. In depth order the ids jump over the whole model: the rectangle a few
+  // iterations ahead is prefetched (at a million Gaussians nearly every read would otherwise miss
+  // the cache).
   out.order.resize(V);
   sc.rects.resize(V);
 #pragma omp parallel for schedule(static)
@@ -228,8 +228,8 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
   out.tile_list.resize(M);
   out.pair_slot.resize(M);
   // Gaussians go in depth order, their pair slots in id order (pair_offset, pair_slot): both
-  // reads jump, so they are prefetched in two stages, the offset 2D ahead and the slots it
-  // points at D ahead.
+  // accesses jump, so they are prefetched in two stages, the offset 2D ahead and the slots it
+  // points at D ahead (every visible Gaussian has a pair, so that offset is below M).
 #pragma omp parallel for schedule(static)
   for (int k = 0; k < chunks; ++k) {
     std::uint64_t* cursor = sc.hist.data() + std::size_t(k) * std::size_t(tiles);
