@@ -517,13 +517,13 @@ class Rasterizer {
     template <class M>
     void gather(const M& m, const std::uint32_t* ids, int first, int count, int K) {
       if constexpr (kBlocks) {
-        // Whole blocks of L coefficients: the ones from K on come along and are never read.
+        // Whole blocks of L coefficients: the ones from K on are loaded along, not stored.
         for (int ch = 0; ch < count; ++ch)
           for (int k0 = 0; k0 < K; k0 += L) {
             D r[L];
             for (int l = 0; l < L; ++l) std::memcpy(&r[l], m.sh_row(ids[l], first + ch) + k0, sizeof(D));
             detail::transpose_square(r);
-            for (int k = 0; k < L; ++k) store(ch, k0 + k, r[k]);
+            for (int k = 0; k < L && k0 + k < K; ++k) store(ch, k0 + k, r[k]);
           }
       } else {
         for (int ch = 0; ch < count; ++ch)
