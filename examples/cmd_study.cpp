@@ -301,8 +301,7 @@ int run_study(const std::vector<std::string>& argv) {
           cfg.train.seed = r.seed;
           cfg.init.seed = std::uint32_t(r.seed);
           cfg.train.stop = &g_stop;
-          const std::vector<std::string> band_ids = r.bands.empty() ? ds.bands() : r.bands;
-          if (!quiet) cfg.train.on_progress = [&](const msgs::TrainProgress& p) { msgs::cli::print_progress(p, band_ids, ""); };
+          if (!quiet) cfg.train.on_progress = [&](const msgs::TrainProgress& p) { msgs::cli::print_progress(p); };
           const msgs::RunResult res = msgs::cli::run_experiment_any(r.sh_degree, ds, cfg, dir);
           write_run_result(dir, res, r, data, ds, omp_threads());
           std::string sheet_note;

@@ -165,7 +165,7 @@ int run_train(const std::vector<std::string>& argv) {
   const std::unique_ptr<msgs::cli::LiveView> live = msgs::cli::start_live_view(args, ds, snapshots, cfg, band_ids.size());
   const bool quiet = args.flag("quiet");
   cfg.train.on_progress = [&](const msgs::TrainProgress& p) {
-    if (!quiet) msgs::cli::print_progress(p, band_ids, "");
+    if (!quiet) msgs::cli::print_progress(p);
   };
   cfg.train.stop = &g_stop;
   std::signal(SIGINT, on_sigint);

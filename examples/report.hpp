@@ -224,7 +224,7 @@ inline std::string metrics_markdown(const std::vector<BandMetrics>& metrics, con
 }
 
 /// One-line progress bar on stderr: step, ETA, loss, per-band training PSNR, Gaussians.
-inline void print_progress(const TrainProgress& p, const std::vector<std::string>& band_ids, const std::string& model) {
+inline void print_progress(const TrainProgress& p) {
   const double frac = double(p.step - p.begin) / double(std::max<long long>(1, p.end - p.begin));
   const double eta = frac > 0 ? p.seconds * (1 - frac) / frac : 0;
   const int width = 24, filled = int(frac * width);
@@ -232,13 +232,13 @@ inline void print_progress(const TrainProgress& p, const std::vector<std::string
   bar += std::string(std::size_t(width - filled), '.');
   std::string psnrs;
   char buf[64];
-  for (std::size_t i = 0; i < p.band_psnr.size() && i < band_ids.size(); ++i) {
+  for (std::size_t i = 0; i < p.band_psnr.size() && i < p.band_ids.size(); ++i) {
     if (std::isnan(p.band_psnr[i])) continue;
-    std::snprintf(buf, sizeof buf, " %s %.1f", band_label(band_ids[i]).c_str(), p.band_psnr[i]);
+    std::snprintf(buf, sizeof buf, " %s %.1f", band_label(p.band_ids[i]).c_str(), p.band_psnr[i]);
     psnrs += buf;
   }
-  std::fprintf(stderr, "\r[%s] %-6s %s step %lld/%lld  ETA %4.0fs  loss %.4f  PSNR%s  N %zu   ", bar.c_str(),
-               model.c_str(), "", p.step, p.end, eta, p.loss, psnrs.c_str(), p.gaussians);
+  std::fprintf(stderr, "\r[%s] step %lld/%lld  ETA %4.0fs  loss %.4f  PSNR%s  N %zu   ", bar.c_str(), p.step, p.end,
+               eta, p.loss, psnrs.c_str(), p.gaussians);
   if (p.step == p.end) std::fprintf(stderr, "\n");
   std::fflush(stderr);
 }

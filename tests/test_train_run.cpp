@@ -172,14 +172,21 @@ TEST_CASE("Split: a complete run trains the RGB model, then every band model on 
   RunConfig cfg = config("split+extadc", 0.002);
   cfg.bands = {"D", "MS_RE"};
   std::vector<std::pair<long long, long long>> ranges;  // (begin, end) reported per model
+  std::vector<std::vector<std::string>> progress_bands;  // the bands each report's PSNRs are of
   cfg.train.progress_every = 1000;
-  cfg.train.on_progress = [&](const TrainProgress& pr) { ranges.emplace_back(pr.begin, pr.end); };
+  cfg.train.on_progress = [&](const TrainProgress& pr) {
+    ranges.emplace_back(pr.begin, pr.end);
+    progress_bands.push_back(pr.band_ids);
+    CHECK(pr.band_ids.size() == pr.band_psnr.size());
+  };
   const RunResult res = run_experiment<kDeg>(tiny(), cfg, out);
   CHECK(res.strategy == "split+extadc");
   CHECK_FALSE(res.interrupted);
   CHECK(res.steps == 120);
   CHECK(res.steps == res.plan.total_steps(1));
   CHECK(ranges == std::vector<std::pair<long long, long long>>{{0, 60}, {60, 120}});
+  // The band model's progress names its own band, not the run's first.
+  CHECK(progress_bands == std::vector<std::vector<std::string>>{{"D"}, {"MS_RE"}});
   REQUIRE(res.metrics.size() == 2);
   CHECK(res.metrics[0].band == "D");
   CHECK(res.metrics[1].band == "MS_RE");

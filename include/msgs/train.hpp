@@ -69,6 +69,8 @@ struct TrainProgress {
   long long step = 0, begin = 0, end = 0;
   double loss = 0;                   ///< running mean of the loss
   std::vector<double> band_psnr;     ///< running mean of the training PSNR per band (NaN until seen)
+  std::vector<std::string> band_ids; ///< the band of each band_psnr entry (this model's bands: one
+                                     ///< band model of Separate or Split trains one of the run's bands)
   std::size_t gaussians = 0;
   double seconds = 0;                ///< since train() started
   DensifyReport last_refine;         ///< most recent refinement
@@ -490,6 +492,7 @@ class Trainer {
         pr.loss = loss_sum / double(std::max<long long>(loss_n, 1));
         loss_sum = 0; loss_n = 0;
         pr.band_psnr = band_psnr_;
+        for (const auto& b : bands_) pr.band_ids.push_back(b.id);
         pr.gaussians = model_.size();
         pr.seconds = seconds(t_start, clock::now());
         pr.last_refine = last_rep;
