@@ -9,6 +9,7 @@
 
 #include "msgs/io/colmap.hpp"
 #include "msgs/io/load_scene.hpp"
+#include "scratch.hpp"
 
 namespace fs = std::filesystem;
 using namespace msgs;
@@ -16,13 +17,7 @@ using namespace msgs::io;
 
 namespace {
 
-fs::path scratch(const std::string& sub) {
-  const char* env = std::getenv("MSGS_TEST_TMP");
-  fs::path d = (env ? fs::path(env) : fs::temp_directory_path()) / "test_colmap" / sub;
-  fs::remove_all(d);
-  fs::create_directories(d);
-  return d;
-}
+fs::path scratch(const std::string& sub) { return msgs::testing::fresh_scratch_dir("test_colmap/" + sub); }
 
 struct Cam { int id; std::string model; int model_id; int w, h; std::vector<double> params; };
 struct Img { int id; double q[4]; double t[3]; int cam; std::string name; };
@@ -141,14 +136,7 @@ void check_model(const ColmapModel& m) {
   CHECK(m.points.rgb[5] == doctest::Approx(3.0f / 255.0f));
 }
 
-std::string error_of(const std::function<void()>& fn) {
-  try {
-    fn();
-  } catch (const IoError& e) {
-    return e.what();
-  }
-  return "<no error>";
-}
+std::string error_of(const std::function<void()>& fn) { return msgs::testing::io_error_of(fn); }
 
 }  // namespace
 

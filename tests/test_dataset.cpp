@@ -8,6 +8,7 @@
 #include <functional>
 
 #include "msgs/io/dataset.hpp"
+#include "scratch.hpp"
 
 namespace fs = std::filesystem;
 using namespace msgs;
@@ -16,13 +17,7 @@ using nlohmann::json;
 
 namespace {
 
-fs::path scratch(const std::string& sub) {
-  const char* env = std::getenv("MSGS_TEST_TMP");
-  fs::path d = (env ? fs::path(env) : fs::temp_directory_path()) / "test_dataset" / sub;
-  fs::remove_all(d);
-  fs::create_directories(d);
-  return d;
-}
+fs::path scratch(const std::string& sub) { return msgs::testing::fresh_scratch_dir("test_dataset/" + sub); }
 
 void write_text(const fs::path& p, const std::string& s) {
   std::ofstream f(p, std::ios::binary);
@@ -106,14 +101,7 @@ fs::path make_dataset(const std::string& name, const std::function<void(json&)>&
   return root;
 }
 
-std::string error_of(const std::function<void()>& fn) {
-  try {
-    fn();
-  } catch (const IoError& e) {
-    return e.what();
-  }
-  return "<no error>";
-}
+std::string error_of(const std::function<void()>& fn) { return msgs::testing::io_error_of(fn); }
 
 }  // namespace
 

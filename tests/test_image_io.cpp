@@ -9,6 +9,7 @@
 #include <stb/stb_image_write.h>
 
 #include "msgs/io/image_io.hpp"
+#include "scratch.hpp"
 
 namespace fs = std::filesystem;
 using msgs::Image;
@@ -16,13 +17,7 @@ using namespace msgs::io;
 
 namespace {
 
-fs::path scratch(const std::string& sub) {
-  const char* env = std::getenv("MSGS_TEST_TMP");
-  fs::path d = (env ? fs::path(env) : fs::temp_directory_path()) / "test_image_io" / sub;
-  fs::remove_all(d);
-  fs::create_directories(d);
-  return d;
-}
+fs::path scratch(const std::string& sub) { return msgs::testing::fresh_scratch_dir("test_image_io/" + sub); }
 
 Image<float> random_image(int w, int h, int c, unsigned seed) {
   std::mt19937 rng(seed);

@@ -12,6 +12,7 @@
 #include <sstream>
 
 #include "msgs/io/ply.hpp"
+#include "scratch.hpp"
 
 namespace fs = std::filesystem;
 using namespace msgs;
@@ -19,13 +20,7 @@ using namespace msgs::io;
 
 namespace {
 
-fs::path scratch(const std::string& sub) {
-  const char* env = std::getenv("MSGS_TEST_TMP");
-  fs::path d = (env ? fs::path(env) : fs::temp_directory_path()) / "test_ply" / sub;
-  fs::remove_all(d);
-  fs::create_directories(d);
-  return d;
-}
+fs::path scratch(const std::string& sub) { return msgs::testing::fresh_scratch_dir("test_ply/" + sub); }
 
 template <class G>
 GaussianModel<G, float> random_model(std::size_t n, unsigned seed) {
@@ -51,14 +46,7 @@ void write_text(const fs::path& p, const std::string& s) {
   f << s;
 }
 
-std::string error_of(const std::function<void()>& fn) {
-  try {
-    fn();
-  } catch (const IoError& e) {
-    return e.what();
-  }
-  return "<no error>";
-}
+std::string error_of(const std::function<void()>& fn) { return msgs::testing::io_error_of(fn); }
 
 }  // namespace
 

@@ -13,19 +13,14 @@
 
 #include "msgs/io/image_io.hpp"
 #include "msgs/io/ply.hpp"
+#include "scratch.hpp"
 
 namespace fs = std::filesystem;
 using namespace msgs;
 
 namespace {
 
-fs::path scratch(const std::string& sub) {
-  const char* env = std::getenv("MSGS_TEST_TMP");
-  fs::path d = (env ? fs::path(env) : fs::temp_directory_path()) / "test_regressions" / sub;
-  fs::remove_all(d);
-  fs::create_directories(d);
-  return d;
-}
+fs::path scratch(const std::string& sub) { return msgs::testing::fresh_scratch_dir("test_regressions/" + sub); }
 
 fs::path put(const fs::path& dir, const std::string& name, const std::string& bytes) {
   const fs::path p = dir / name;
