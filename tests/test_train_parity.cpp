@@ -200,8 +200,17 @@ TEST_CASE("presets: reference is TrainOptions{}, fast names and applies its depa
   CHECK(t.spectral_colour_init);
   CHECK(t.clamp_render);  // the parity switches stay the reference's
   CHECK(preset_departures(Preset::fast, 0.025).size() == 2);
-  CHECK(fast_lr_sh_dc(0.4) == doctest::Approx(0.0025));
-  CHECK(fast_lr_sh_dc(1.0) == doctest::Approx(0.0025));
+  CHECK(fast_lr_sh_dc(0.4) == 0.0025);  // exactly the reference's rate from scale 0.4 on
+  CHECK(fast_lr_sh_dc(1.0) == 0.0025);
+  // There colour-lr is no departure: the fast preset is the reference plus spectral-init.
+  CHECK(preset_departures(Preset::fast, 0.4).size() == 1);
+  CHECK(preset_departures(Preset::fast, 1.0).front().name == "spectral-init");
+  CHECK(preset_departures(Preset::fast, 0.39).size() == 2);
+  {
+    TrainOptions at_full;
+    apply_preset(Preset::fast, at_full, 1.0);
+    CHECK(at_full.adam.lr_sh_dc == TrainOptions{}.adam.lr_sh_dc);
+  }
   CHECK(fast_lr_sh_dc(1e-4) == doctest::Approx(0.025));  // at most 10x
   CHECK(parse_preset("fast") == Preset::fast);
   CHECK_THROWS_AS(parse_preset("quick"), std::invalid_argument);

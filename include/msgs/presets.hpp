@@ -13,6 +13,7 @@
 #include <string_view>
 #include <vector>
 
+#include "adam.hpp"
 #include "schedule.hpp"
 
 namespace msgs {
@@ -40,18 +41,22 @@ struct PresetDeparture {
 /// `small` from 27.7 to 32.2 dB; from scale 0.4 on it is the reference's rate.
 inline double fast_lr_sh_dc(double scale) {
   ScheduleScale{scale}.validate();
-  return 0.0025 * std::clamp(std::sqrt(0.4 / scale), 1.0, 10.0);
+  return AdamConfig{}.lr_sh_dc * std::clamp(std::sqrt(0.4 / scale), 1.0, 10.0);
 }
 
 /// The departures of `p` from the reference at schedule scale `scale` (empty for the reference).
+/// colour-lr is listed only where it changes the rate (below scale 0.4): from 0.4 on the fast
+/// preset differs from the reference by spectral-init alone, so its Separate and plain Joint runs
+/// (which have no narrow band joining trained geometry) are the reference's, bit for bit.
 inline std::vector<PresetDeparture> preset_departures(Preset p, double scale) {
   if (p == Preset::reference) return {};
-  return {
-      {"colour-lr", "SH DC learning rate " + std::to_string(fast_lr_sh_dc(scale)) +
-                        " (reference 0.0025): 0.0025 sqrt(0.4 / scale), between 1x and 10x"},
-      {"spectral-init", "narrow bands start from the geometry band's luminance at their own brightness, "
-                        "not from random colours (SpecDelay's Joint and Split's band models)"},
-  };
+  std::vector<PresetDeparture> out;
+  if (fast_lr_sh_dc(scale) != AdamConfig{}.lr_sh_dc)
+    out.push_back({"colour-lr", "SH DC learning rate " + std::to_string(fast_lr_sh_dc(scale)) +
+                                    " (reference 0.0025): 0.0025 sqrt(0.4 / scale), between 1x and 10x"});
+  out.push_back({"spectral-init", "narrow bands start from the geometry band's luminance at their own brightness, "
+                                  "not from random colours (SpecDelay's Joint and Split's band models)"});
+  return out;
 }
 
 /// Set the options `p` decides in `t` (a TrainOptions, train.hpp), for a run at schedule scale
