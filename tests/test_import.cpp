@@ -248,8 +248,10 @@ TEST_CASE("run_process: a child that uses no CPU time is stopped; a busy one run
   const auto t0 = std::chrono::steady_clock::now();
   CHECK(msgs::cli::run_process({"sleep", "30"}, log, log, 0.5) == msgs::cli::kProcessHung);
   CHECK(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() < 10);
-  // A shell loop busy for longer than the limit keeps its CPU time rising.
-  CHECK(msgs::cli::run_process({"sh", "-c", "i=0; while [ $i -lt 600000 ]; do i=$((i+1)); done; exit 3"}, log, log, 0.25) == 3);
+  // A shell loop busy for longer than the limit (about 2.5 s of CPU time, 1 s limit) keeps its CPU
+  // time rising. The limit leaves room for a loaded machine: at 0.25 s a loop sharing both cores
+  // with parallel tests and a niced ctest went a whole period without a clock tick of CPU time.
+  CHECK(msgs::cli::run_process({"sh", "-c", "i=0; while [ $i -lt 1600000 ]; do i=$((i+1)); done; exit 3"}, log, log, 1.0) == 3);
   CHECK(msgs::cli::run_process({"sh", "-c", "exit 5"}, log, log) == 5);  // no limit: as before
   CHECK(msgs::cli::process_cpu_seconds(::getpid()) >= 0);
   CHECK(msgs::cli::process_cpu_seconds(-1) == -1);
