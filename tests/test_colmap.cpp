@@ -5,13 +5,13 @@
 
 #include <cstdlib>
 #include <fstream>
-#include <functional>
 
 #include "msgs/io/colmap.hpp"
 #include "msgs/io/load_scene.hpp"
 #include "scratch.hpp"
 
 namespace fs = std::filesystem;
+using msgs::testing::io_error_of;
 using namespace msgs;
 using namespace msgs::io;
 
@@ -136,8 +136,6 @@ void check_model(const ColmapModel& m) {
   CHECK(m.points.rgb[5] == doctest::Approx(3.0f / 255.0f));
 }
 
-std::string error_of(const std::function<void()>& fn) { return msgs::testing::io_error_of(fn); }
-
 }  // namespace
 
 TEST_CASE("COLMAP text model") {
@@ -193,7 +191,7 @@ TEST_CASE("COLMAP RGB dataset: images/ + sparse/0, lazy loading, split every n-t
     CHECK((a - b).norm() < 1e-4f);
   }
   fs::remove(root / "images" / "b.png");
-  CHECK(error_of([&] { (void)load_colmap_dataset(root); }).find("b.png") != std::string::npos);
+  CHECK(io_error_of([&] { (void)load_colmap_dataset(root); }).find("b.png") != std::string::npos);
 }
 
 TEST_CASE("bad COLMAP: unsupported model, wrong parameter count, missing camera, truncated binary") {
@@ -206,7 +204,7 @@ TEST_CASE("bad COLMAP: unsupported model, wrong parameter count, missing camera,
     std::ofstream i(dir / "images.txt");
     i << "1 1 0 0 0 0 0 0 4 x.png\n\n";
   }
-  auto msg = error_of([&] { (void)read_colmap(dir); });
+  auto msg = io_error_of([&] { (void)read_colmap(dir); });
   CHECK(msg.find("cameras.txt") != std::string::npos);
   CHECK(msg.find("FOV") != std::string::npos);
 
@@ -214,7 +212,7 @@ TEST_CASE("bad COLMAP: unsupported model, wrong parameter count, missing camera,
   cs = cams;
   cs[0].params.pop_back();
   write_text_model(dir, cs);
-  msg = error_of([&] { (void)read_colmap(dir); });
+  msg = io_error_of([&] { (void)read_colmap(dir); });
   CHECK(msg.find("line 3") != std::string::npos);
   CHECK(msg.find("needs 4 parameters") != std::string::npos);
 
@@ -224,18 +222,18 @@ TEST_CASE("bad COLMAP: unsupported model, wrong parameter count, missing camera,
     std::ofstream i(dir / "images.txt");
     i << "1 1 0 0 0 0 0 0 42 x.png\n\n";
   }
-  msg = error_of([&] { (void)read_colmap(dir); });
+  msg = io_error_of([&] { (void)read_colmap(dir); });
   CHECK(msg.find("camera 42") != std::string::npos);
 
   dir = scratch("bad_trunc");
   write_binary_model(dir);
   fs::resize_file(dir / "images.bin", fs::file_size(dir / "images.bin") - 5);
-  msg = error_of([&] { (void)read_colmap(dir); });
+  msg = io_error_of([&] { (void)read_colmap(dir); });
   CHECK(msg.find("images.bin") != std::string::npos);
   CHECK(msg.find("truncated") != std::string::npos);
 
   dir = scratch("missing");
-  msg = error_of([&] { (void)read_colmap(dir); });
+  msg = io_error_of([&] { (void)read_colmap(dir); });
   CHECK(msg.find("cameras") != std::string::npos);
 }
 
@@ -281,9 +279,9 @@ TEST_CASE("load_scene: detects the layout, image folders of resized copies, grey
   CHECK(grey.at(5, 5, 0) == doctest::Approx(0.75).epsilon(0.01));
   CHECK(grey.at(5, 5, 2) == grey.at(5, 5, 0));
   write_png8(root / "small" / "a.png", Image<float>(20, 20, 3, 0.5f));  // not a uniform resize
-  CHECK(error_of([&] { (void)load_scene(root, opt, "small"); }).find("aspect ratio") != std::string::npos);
-  CHECK(error_of([&] { (void)load_scene(root, opt, "images_8"); }).find("images_8") != std::string::npos);
-  CHECK(error_of([&] { (void)load_scene(root, opt, "nowhere"); }).find("nowhere") != std::string::npos);
+  CHECK(io_error_of([&] { (void)load_scene(root, opt, "small"); }).find("aspect ratio") != std::string::npos);
+  CHECK(io_error_of([&] { (void)load_scene(root, opt, "images_8"); }).find("images_8") != std::string::npos);
+  CHECK(io_error_of([&] { (void)load_scene(root, opt, "nowhere"); }).find("nowhere") != std::string::npos);
 
   // A text model directly in sparse/.
   const auto flat = scratch("scene_flat");
@@ -293,11 +291,11 @@ TEST_CASE("load_scene: detects the layout, image folders of resized copies, grey
 
   // Neither layout: one message naming both and the import command.
   const auto empty = scratch("scene_none");
-  const std::string msg = error_of([&] { (void)detect_scene(empty); });
+  const std::string msg = io_error_of([&] { (void)detect_scene(empty); });
   CHECK(msg.find("transforms.json") != std::string::npos);
   CHECK(msg.find("sparse/0") != std::string::npos);
   CHECK(msg.find("msgs import") != std::string::npos);
-  CHECK(error_of([&] { (void)detect_scene(empty / "missing"); }).find("does not exist") != std::string::npos);
+  CHECK(io_error_of([&] { (void)detect_scene(empty / "missing"); }).find("does not exist") != std::string::npos);
   CHECK(downscale_folder_factor("images_4") == 4);
   CHECK(!downscale_folder_factor("images_").has_value());
   CHECK(!downscale_folder_factor("images_x").has_value());

@@ -11,6 +11,7 @@
 #include "scratch.hpp"
 
 namespace fs = std::filesystem;
+using msgs::testing::io_error_of;
 using namespace msgs;
 using namespace msgs::io;
 using nlohmann::json;
@@ -100,8 +101,6 @@ fs::path make_dataset(const std::string& name, const std::function<void(json&)>&
              "0 0 0 255 0 0\n0.5 -0.25 0.75 0 255 0\n-1 1 0.2 0 0 255\n");
   return root;
 }
-
-std::string error_of(const std::function<void()>& fn) { return msgs::testing::io_error_of(fn); }
 
 }  // namespace
 
@@ -268,7 +267,7 @@ TEST_CASE("distorted frames are undistorted at load time") {
 
 TEST_CASE("bad dataset: missing transforms.json") {
   const auto root = scratch("no_tf");
-  const auto msg = error_of([&] { (void)load_dataset(root); });
+  const auto msg = io_error_of([&] { (void)load_dataset(root); });
   CHECK(msg.find("transforms.json") != std::string::npos);
   CHECK(msg.find("does not exist") != std::string::npos);
 }
@@ -276,21 +275,21 @@ TEST_CASE("bad dataset: missing transforms.json") {
 TEST_CASE("bad dataset: missing image") {
   const auto root = make_dataset("no_image");
   fs::remove(root / "images" / "MS_NIR_00003.tif");
-  const auto msg = error_of([&] { (void)load_dataset(root); });
+  const auto msg = io_error_of([&] { (void)load_dataset(root); });
   CHECK(msg.find("frames[5].file_path") != std::string::npos);
   CHECK(msg.find("MS_NIR_00003.tif") != std::string::npos);
 }
 
 TEST_CASE("bad dataset: unknown mm_channel") {
   const auto root = make_dataset("bad_band", [](json& tf) { tf["frames"][3]["mm_channel"] = "MS_UV"; });
-  const auto msg = error_of([&] { (void)load_dataset(root); });
+  const auto msg = io_error_of([&] { (void)load_dataset(root); });
   CHECK(msg.find("frames[3].mm_channel") != std::string::npos);
   CHECK(msg.find("MS_UV") != std::string::npos);
 }
 
 TEST_CASE("bad dataset: frame with no intrinsics") {
   const auto root = make_dataset("no_intr", [](json& tf) { tf.erase("fl_y"); });
-  const auto msg = error_of([&] { (void)load_dataset(root); });
+  const auto msg = io_error_of([&] { (void)load_dataset(root); });
   CHECK(msg.find("frames[0].fl_y") != std::string::npos);
   CHECK(msg.find("missing intrinsics") != std::string::npos);
 }
@@ -298,7 +297,7 @@ TEST_CASE("bad dataset: frame with no intrinsics") {
 TEST_CASE("bad dataset: image size contradicting w/h") {
   const auto root = make_dataset("bad_size", [](json& tf) { tf["frames"][1]["w"] = W + 2; });
   const Dataset ds = load_dataset(root);
-  const auto msg = error_of([&] { (void)load_frame_image(ds, ds.frames[1]); });
+  const auto msg = io_error_of([&] { (void)load_frame_image(ds, ds.frames[1]); });
   CHECK(msg.find("MS_NIR_00001.tif") != std::string::npos);
   CHECK(msg.find(cat(W, "x", H)) != std::string::npos);
   CHECK(msg.find(cat(W + 2, "x", H)) != std::string::npos);
@@ -309,7 +308,7 @@ TEST_CASE("bad dataset: truncated image") {
   const auto p = root / "images" / "D_00002.png";
   fs::resize_file(p, fs::file_size(p) / 2);
   const Dataset ds = load_dataset(root);
-  const auto msg = error_of([&] { (void)load_frame_image(ds, ds.frames[2]); });
+  const auto msg = io_error_of([&] { (void)load_frame_image(ds, ds.frames[2]); });
   CHECK(msg.find("D_00002.png") != std::string::npos);
   CHECK(msg.find("truncated") != std::string::npos);
 }
@@ -317,7 +316,7 @@ TEST_CASE("bad dataset: truncated image") {
 TEST_CASE("bad dataset: split entry that matches no frame") {
   const auto root = make_dataset("bad_split");
   write_text(root / "train_split.json", "{\"train\": [\"images/D_00002.png\", \"images/D_00099.png\",], \"eval\": [],}");
-  const auto msg = error_of([&] { (void)load_dataset(root); });
+  const auto msg = io_error_of([&] { (void)load_dataset(root); });
   CHECK(msg.find("train_split.json") != std::string::npos);
   CHECK(msg.find("train[1]") != std::string::npos);
   CHECK(msg.find("D_00099.png") != std::string::npos);
@@ -326,28 +325,28 @@ TEST_CASE("bad dataset: split entry that matches no frame") {
 TEST_CASE("bad dataset: malformed JSON, bad matrix, missing point cloud") {
   auto root = make_dataset("bad_json");
   write_text(root / "transforms.json", "{\"frames\": [ {\"file_path\": ");
-  CHECK(error_of([&] { (void)load_dataset(root); }).find("invalid JSON") != std::string::npos);
+  CHECK(io_error_of([&] { (void)load_dataset(root); }).find("invalid JSON") != std::string::npos);
   // A number beyond double's range is out_of_range to the JSON parser, not a parse error (found by
   // fuzz_dataset): still an IoError naming the file.
   write_text(root / "transforms.json", "{\"frames\": [], \"fl_x\": 1E1111111111}");
-  const std::string overflow = error_of([&] { (void)load_dataset(root); });
+  const std::string overflow = io_error_of([&] { (void)load_dataset(root); });
   CHECK(overflow.find("invalid JSON") != std::string::npos);
   CHECK(overflow.find("transforms.json") != std::string::npos);
   root = make_dataset("bad_matrix", [](json& tf) { tf["frames"][0]["transform_matrix"][0][0] = 2.0; });
-  CHECK(error_of([&] { (void)load_dataset(root); }).find("frames[0].transform_matrix") != std::string::npos);
+  CHECK(io_error_of([&] { (void)load_dataset(root); }).find("frames[0].transform_matrix") != std::string::npos);
   // Finite in double, infinite in the single-precision camera (found by fuzz_dataset): an IoError
   // naming the file and the frame, with and without re-orientation.
   root = make_dataset("huge_translation", [](json& tf) { tf["frames"][0]["transform_matrix"][2][3] = 1e55; });
   for (bool orient : {true, false}) {
     LoadOptions opt;
     opt.orient_and_center = orient;
-    const std::string err = error_of([&] { (void)load_dataset(root, opt); });
+    const std::string err = io_error_of([&] { (void)load_dataset(root, opt); });
     CHECK(err.find("transforms.json") != std::string::npos);
     CHECK(err.find("single precision") != std::string::npos);
   }
   root = make_dataset("no_ply");
   fs::remove(root / "sparse_pc.ply");
-  CHECK(error_of([&] { (void)load_dataset(root); }).find("ply_file_path") != std::string::npos);
+  CHECK(io_error_of([&] { (void)load_dataset(root); }).find("ply_file_path") != std::string::npos);
 }
 
 TEST_CASE("rotation_between maps a onto b, including opposite vectors") {

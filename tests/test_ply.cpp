@@ -6,7 +6,6 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
-#include <functional>
 #include <limits>
 #include <random>
 #include <sstream>
@@ -15,6 +14,7 @@
 #include "scratch.hpp"
 
 namespace fs = std::filesystem;
+using msgs::testing::io_error_of;
 using namespace msgs;
 using namespace msgs::io;
 
@@ -45,8 +45,6 @@ void write_text(const fs::path& p, const std::string& s) {
   std::ofstream f(p, std::ios::binary);
   f << s;
 }
-
-std::string error_of(const std::function<void()>& fn) { return msgs::testing::io_error_of(fn); }
 
 }  // namespace
 
@@ -135,8 +133,8 @@ TEST_CASE("lower SH degree in the file is zero-padded; higher degree and other c
   CHECK(m3.quats == m0.quats);
 
   write_ply(dir / "d3.ply", random_model<Gaussian<3, 3>>(4, 8));
-  CHECK(error_of([&] { (void)read_ply<Gaussian<3, 1>>(dir / "d3.ply"); }).find("SH degree 3") != std::string::npos);
-  const auto msg = error_of([&] { (void)read_ply<Gaussian<7, 3>>(dir / "d3.ply"); });
+  CHECK(io_error_of([&] { (void)read_ply<Gaussian<3, 1>>(dir / "d3.ply"); }).find("SH degree 3") != std::string::npos);
+  const auto msg = io_error_of([&] { (void)read_ply<Gaussian<7, 3>>(dir / "d3.ply"); });
   CHECK(msg.find("d3.ply") != std::string::npos);
   CHECK(msg.find("f_dc") != std::string::npos);
   CHECK(msg.find("3 colour channels") != std::string::npos);
@@ -161,10 +159,10 @@ TEST_CASE("RGB export of a Joint model is a plain 3-channel file") {
 TEST_CASE("writer refuses bad band names and non-finite parameters, leaving no file") {
   const auto dir = scratch("badwrite");
   auto m = random_model<Gaussian<1, 0>>(3, 1);
-  CHECK(error_of([&] { write_ply(dir / "a.ply", m, {"a", "b"}); }).find("band_names") != std::string::npos);
-  CHECK(error_of([&] { write_ply(dir / "a.ply", m, {"has space"}); }).find("whitespace") != std::string::npos);
+  CHECK(io_error_of([&] { write_ply(dir / "a.ply", m, {"a", "b"}); }).find("band_names") != std::string::npos);
+  CHECK(io_error_of([&] { write_ply(dir / "a.ply", m, {"has space"}); }).find("whitespace") != std::string::npos);
   m.log_scales[4] = std::numeric_limits<float>::infinity();
-  CHECK(error_of([&] { write_ply(dir / "a.ply", m); }).find("scale") != std::string::npos);
+  CHECK(io_error_of([&] { write_ply(dir / "a.ply", m); }).find("scale") != std::string::npos);
   CHECK(fs::is_empty(dir));
 }
 
@@ -205,7 +203,7 @@ TEST_CASE("bad PLY: truncated binary model") {
   const auto dir = scratch("trunc");
   write_ply(dir / "m.ply", random_model<Gaussian<3, 1>>(10, 3));
   fs::resize_file(dir / "m.ply", fs::file_size(dir / "m.ply") - 7);
-  const auto msg = error_of([&] { (void)read_ply<Gaussian<3, 1>>(dir / "m.ply"); });
+  const auto msg = io_error_of([&] { (void)read_ply<Gaussian<3, 1>>(dir / "m.ply"); });
   CHECK(msg.find("m.ply") != std::string::npos);
   CHECK(msg.find("truncated") != std::string::npos);
   CHECK(msg.find("entry 9") != std::string::npos);
@@ -216,16 +214,16 @@ TEST_CASE("bad PLY: header count smaller than the data (wrong counts)") {
   write_text(dir / "a.ply",
              "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
              "end_header\n1 2 3\n4 5 6\n");
-  CHECK(error_of([&] { (void)read_point_cloud(dir / "a.ply"); }).find("after the declared elements") !=
+  CHECK(io_error_of([&] { (void)read_point_cloud(dir / "a.ply"); }).find("after the declared elements") !=
         std::string::npos);
   write_text(dir / "b.ply",
              "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
              "end_header\n1 2 3\n4 5 6\n");
-  CHECK(error_of([&] { (void)read_point_cloud(dir / "b.ply"); }).find("truncated") != std::string::npos);
+  CHECK(io_error_of([&] { (void)read_point_cloud(dir / "b.ply"); }).find("truncated") != std::string::npos);
   write_text(dir / "c.ply",
              "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
              "end_header\n1 2\n");
-  CHECK(error_of([&] { (void)read_point_cloud(dir / "c.ply"); }).find("field 'z'") != std::string::npos);
+  CHECK(io_error_of([&] { (void)read_point_cloud(dir / "c.ply"); }).find("field 'z'") != std::string::npos);
 }
 
 TEST_CASE("bad PLY: unsupported property types") {
@@ -233,15 +231,15 @@ TEST_CASE("bad PLY: unsupported property types") {
   write_text(dir / "a.ply",
              "ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty half x\nproperty float y\n"
              "property float z\nend_header\n");
-  const auto msg = error_of([&] { (void)read_point_cloud(dir / "a.ply"); });
+  const auto msg = io_error_of([&] { (void)read_point_cloud(dir / "a.ply"); });
   CHECK(msg.find("field 'x'") != std::string::npos);
   CHECK(msg.find("half") != std::string::npos);
   write_text(dir / "b.ply",
              "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
              "property list uchar float extra\nend_header\n1 2 3 1 4\n");
-  CHECK(error_of([&] { (void)read_point_cloud(dir / "b.ply"); }).find("field 'extra'") != std::string::npos);
+  CHECK(io_error_of([&] { (void)read_point_cloud(dir / "b.ply"); }).find("field 'extra'") != std::string::npos);
   write_text(dir / "c.ply", "ply\nformat binary_middle_endian 1.0\nend_header\n");
-  CHECK(error_of([&] { (void)read_point_cloud(dir / "c.ply"); }).find("binary_middle_endian") != std::string::npos);
+  CHECK(io_error_of([&] { (void)read_point_cloud(dir / "c.ply"); }).find("binary_middle_endian") != std::string::npos);
 }
 
 TEST_CASE("bad PLY: NaN values are refused with the field name") {
@@ -249,7 +247,7 @@ TEST_CASE("bad PLY: NaN values are refused with the field name") {
   write_text(dir / "a.ply",
              "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\n"
              "end_header\n1 2 3\n4 nan 6\n");
-  const auto msg = error_of([&] { (void)read_point_cloud(dir / "a.ply"); });
+  const auto msg = io_error_of([&] { (void)read_point_cloud(dir / "a.ply"); });
   CHECK(msg.find("field 'y'") != std::string::npos);
   CHECK(msg.find("vertex 1") != std::string::npos);
   // Binary model with a NaN opacity, patched into a valid file.
@@ -261,22 +259,22 @@ TEST_CASE("bad PLY: NaN values are refused with the field name") {
   // properties: x y z nx ny nz f_dc_0 opacity ... -> opacity is index 7, vertex 1 starts at 15 floats
   std::memcpy(bytes.data() + hend + (15 + 7) * 4, &nan, 4);
   write_bytes_atomic(dir / "m.ply", bytes.data(), bytes.size());
-  const auto msg2 = error_of([&] { (void)read_ply<Gaussian<1, 0>>(dir / "m.ply"); });
+  const auto msg2 = io_error_of([&] { (void)read_ply<Gaussian<1, 0>>(dir / "m.ply"); });
   CHECK(msg2.find("field 'opacity'") != std::string::npos);
   CHECK(msg2.find("vertex 1") != std::string::npos);
 }
 
 TEST_CASE("bad PLY: missing file, not a PLY, missing properties, gaps in f_rest") {
   const auto dir = scratch("misc");
-  CHECK(error_of([&] { (void)inspect_ply(dir / "none.ply"); }).find("does not exist") != std::string::npos);
+  CHECK(io_error_of([&] { (void)inspect_ply(dir / "none.ply"); }).find("does not exist") != std::string::npos);
   write_text(dir / "x.ply", "PNG\n");
-  CHECK(error_of([&] { (void)inspect_ply(dir / "x.ply"); }).find("not a PLY") != std::string::npos);
+  CHECK(io_error_of([&] { (void)inspect_ply(dir / "x.ply"); }).find("not a PLY") != std::string::npos);
   write_text(dir / "y.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nend_header\n1 2\n");
-  CHECK(error_of([&] { (void)read_point_cloud(dir / "y.ply"); }).find("field 'z'") != std::string::npos);
+  CHECK(io_error_of([&] { (void)read_point_cloud(dir / "y.ply"); }).find("field 'z'") != std::string::npos);
   write_text(dir / "z.ply",
              "ply\nformat binary_little_endian 1.0\nelement vertex 0\nproperty float x\nproperty float f_dc_0\n"
              "property float f_rest_0\nproperty float f_rest_2\nproperty float opacity\nend_header\n");
-  CHECK(error_of([&] { (void)inspect_ply(dir / "z.ply"); }).find("f_rest_") != std::string::npos);
+  CHECK(io_error_of([&] { (void)inspect_ply(dir / "z.ply"); }).find("f_rest_") != std::string::npos);
   write_text(dir / "h.ply", "ply\nformat ascii 1.0\nelement vertex 1\n");
-  CHECK(error_of([&] { (void)inspect_ply(dir / "h.ply"); }).find("end_header") != std::string::npos);
+  CHECK(io_error_of([&] { (void)inspect_ply(dir / "h.ply"); }).find("end_header") != std::string::npos);
 }

@@ -51,8 +51,8 @@ inline double fast_lr_sh_dc(double scale) {
 inline std::vector<PresetDeparture> preset_departures(Preset p, double scale) {
   if (p == Preset::reference) return {};
   std::vector<PresetDeparture> out;
-  if (fast_lr_sh_dc(scale) != AdamConfig{}.lr_sh_dc)
-    out.push_back({"colour-lr", "SH DC learning rate " + std::to_string(fast_lr_sh_dc(scale)) +
+  if (const double lr = fast_lr_sh_dc(scale); lr != AdamConfig{}.lr_sh_dc)
+    out.push_back({"colour-lr", "SH DC learning rate " + std::to_string(lr) +
                                     " (reference 0.0025): 0.0025 sqrt(0.4 / scale), between 1x and 10x"});
   out.push_back({"spectral-init", "narrow bands start from the geometry band's luminance at their own brightness, "
                                   "not from random colours (SpecDelay's Joint and Split's band models)"});
