@@ -6,7 +6,9 @@
 // every few hundred steps, not every step. Models: B1_SH3 (Gaussian<1, 3>), B3_SH3 (Gaussian<3, 3>,
 // all three channels rendered) and B7_SH3_band3 (Gaussian<7, 3> rendering channel 3 alone, the same
 // geometry as B1_SH3); the "_half" scenes move about half of the Gaussians out of the view, as in
-// real training where a view sees only part of the model.
+// real training where a view sees only part of the model, with the seen and unseen ones interleaved
+// in memory; "_half_ordered" is the same scene in spatial order (spatial_order.hpp), the order in
+// which training keeps its models (DensifyConfig::reorder_every).
 //
 // Counters: steps/s, gaussians/s (N per step), visible (Gaussians the view saw), bytes_per_step
 // (the memory traffic a step cannot avoid, see step_bytes below), triad_GBps (a STREAM triad
@@ -55,7 +57,7 @@ struct SizeCase {
   std::size_t n;
   int width, height;
   const char* name;
-  bool half;  ///< also register the "_half" scene at this size
+  bool half;  ///< also register the "_half" and "_half_ordered" scenes at this size
 };
 constexpr SizeCase kSizes[] = {
     {100000, 640, 480, "100k_640x480", true},
@@ -70,17 +72,25 @@ SceneSpec spec_of(int size) { return bench::scene_spec(kSizes[size].n, kSizes[si
 /// out of the view: x shifted by 6 away from the centre gives |x| in [4, 8] at z in [3, 5], i.e.
 /// |x / z| >= 0.8 against the view's half-width of 0.5 W / fx = 0.625, farther than any footprint
 /// (3 sigma <= 0.15). They are still in front of the camera, so projection does its full work on
-/// them; the moved ones are interleaved with the seen ones in memory, as after densification.
+/// them; the moved ones are interleaved with the seen ones in memory, as in a model refined in
+/// gsplat's row order (survivors, then copies and split samples appended).
+/// With `ordered`, the rows are then put into spatial order.
 template <class G>
-GaussianModel<G, float> scene_model(const SceneSpec& spec, bool half) {
+GaussianModel<G, float> scene_model(const SceneSpec& spec, bool half, bool ordered) {
   GaussianModel<G, float> m = bench::family_model<G, float>(spec);
   if (half) {
     std::mt19937_64 coin(spec.seed ^ 0x4a1f5e11d00dull);
     for (std::size_t i = 0; i < m.size(); ++i)
       if (coin() & 1u) m.means[3 * i] += m.means[3 * i] < 0 ? -6.0f : 6.0f;
   }
+  if (ordered) apply(spatial_order_plan(m), m);
   return m;
 }
+
+/// The scenes of one size: every Gaussian in view, about half out of view (rows interleaved), and
+/// the same half scene in spatial order.
+enum class Variant { full, half, half_ordered };
+const char* suffix(Variant v) { return v == Variant::full ? "" : v == Variant::half ? "_half" : "_half_ordered"; }
 
 /// Bytes one step must move, the bound bound_ratio compares with. Every Gaussian the step touches
 /// has P = 11 + 16 C floats that it updates: 11 geometry (mean 3, log-scale 3, quaternion 4,
@@ -175,8 +185,8 @@ struct StepBench {
     return c;
   }
 
-  StepBench(const SceneSpec& spec, bool half, int first_channel, int channels, bool sparse_step)
-      : model(scene_model<G>(spec, half)),
+  StepBench(const SceneSpec& spec, Variant v, int first_channel, int channels, bool sparse_step)
+      : model(scene_model<G>(spec, v != Variant::full, v == Variant::half_ordered)),
         cam(bench::family_camera<float>(spec)),
         // The target: a fixed seeded image in [0, 1) with the rendered band's channels.
         gt(bench::family_image_grad<float>(spec, channels)),
@@ -231,12 +241,12 @@ struct StepBench {
 };
 
 template <class G>
-void bm_train_step(benchmark::State& st, int size, bool half, int threads, int first, int count, bool sparse) {
+void bm_train_step(benchmark::State& st, int size, Variant v, int threads, int first, int count, bool sparse) {
   omp_set_num_threads(threads);
   const double gbps = triad_gbps(threads);
   omp_set_num_threads(threads);
   const SceneSpec spec = spec_of(size);
-  StepBench<G> b(spec, half, first, count, sparse);
+  StepBench<G> b(spec, v, first, count, sparse);
   b.step();  // allocate the rasteriser, loss and gradient buffers before timing
   b.stages = {};
   b.raster.timings().reset();
@@ -286,13 +296,13 @@ void tune(benchmark::internal::Benchmark* b, int size) {
 }
 
 template <class G>
-void register_case(const std::string& tag, int size, bool half, int threads, int first, int count) {
+void register_case(const std::string& tag, int size, Variant v, int threads, int first, int count) {
   for (const bool sparse : {false, true}) {
-    const std::string name = "train_step/" + tag + "/" + kSizes[size].name + (half ? "_half" : "") +
+    const std::string name = "train_step/" + tag + "/" + kSizes[size].name + suffix(v) +
                              (sparse ? "/sparse" : "/dense") + "/threads:" + std::to_string(threads);
     tune(benchmark::RegisterBenchmark(name.c_str(),
                                       [=](benchmark::State& st) {
-                                        bm_train_step<G>(st, size, half, threads, first, count, sparse);
+                                        bm_train_step<G>(st, size, v, threads, first, count, sparse);
                                       }),
          size);
   }
@@ -304,13 +314,13 @@ int main(int argc, char** argv) {
   const char* large = std::getenv("MSGS_BENCH_LARGE");
   const int sizes = (large && std::string(large) != "0") ? 3 : 2;
   for (int size = 0; size < sizes; ++size)
-    for (bool half : {false, true}) {
-      if (half && !kSizes[size].half) continue;
+    for (Variant v : {Variant::full, Variant::half, Variant::half_ordered}) {
+      if (v != Variant::full && !kSizes[size].half) continue;
       for (int threads : {1, 2}) {
-        register_case<Gaussian<1, 3>>("B1_SH3", size, half, threads, 0, 1);
-        register_case<Gaussian<3, 3>>("B3_SH3", size, half, threads, 0, 3);
+        register_case<Gaussian<1, 3>>("B1_SH3", size, v, threads, 0, 1);
+        register_case<Gaussian<3, 3>>("B3_SH3", size, v, threads, 0, 3);
         // One narrow band of a Joint model: same geometry as B1_SH3 (same seed), channel 3 only.
-        register_case<Gaussian<7, 3>>("B7_SH3_band3", size, half, threads, 3, 1);
+        register_case<Gaussian<7, 3>>("B7_SH3_band3", size, v, threads, 3, 1);
       }
     }
   benchmark::Initialize(&argc, argv);

@@ -28,7 +28,7 @@ constexpr const char* kUsage =
     "usage: msgs train --data DIR --out DIR [--strategy NAME] [--scale F] [--sh-degree D]\n"
     "                  [--bands D,MS_G,...] [--seed S] [--orient none|center] [--resume] [--checkpoint-every N]\n"
     "                  [--sheets N] [--max-gaussians N] [--stop-gaussians N] [--images NAME] [--eval-every N]\n"
-    "                  [--geometry-band ID]\n"
+    "                  [--geometry-band ID] [--reorder-every N]\n"
     "                  [--exposure [--lr-exposure X]] [--preset reference|fast] [--ssim valid|same]\n"
     "                  [--no-clamp] [--shuffle every-pass|once] [--adam sparse|dense] [--lr-sh-dc X]\n"
     "                  [--spectral-init on|off]\n"
@@ -65,6 +65,11 @@ constexpr const char* kUsage =
     "                    N Gaussians (default: what fits in three quarters of the memory available\n"
     "                    at the start; 0 = never). Runaway densification then ends with a message\n"
     "                    instead of running out of memory; below the limit results are unchanged\n"
+    "  --reorder-every N sort the Gaussians into spatial order at every N-th refinement and at the\n"
+    "                    last before a pause or the end of densification, so that the Gaussians a\n"
+    "                    view sees are neighbours in memory (8 makes the demo about 8% faster;\n"
+    "                    default 0: gsplat's row order). It moves rows, not values, but the split\n"
+    "                    samples' offsets are drawn per row, so a run takes another course\n"
     MSGS_TRAIN_OPTIONS_USAGE
     "  --exposure        learn a per-image exposure correction: a gain exp(a_c) and an offset b_c per\n"
     "                    channel of every training image, applied to its render before the loss\n"
@@ -103,7 +108,7 @@ using msgs::cli::split_list;
 
 int run_train(const std::vector<std::string>& argv) {
   std::vector<std::string> values = {"data", "images", "eval-every", "out", "strategy", "scale", "sh-degree", "bands", "seed",
-                                     "checkpoint-every", "orient", "densify", "sheets", "max-gaussians", "stop-gaussians", "geometry-band",
+                                     "checkpoint-every", "orient", "densify", "sheets", "max-gaussians", "stop-gaussians", "reorder-every", "geometry-band",
                                      "lr-exposure", "view", "host"};
   std::vector<std::string> flags = {"help", "no-orient", "quiet", "resume", "exposure"};
   for (const auto& k : msgs::cli::train_option_values()) values.push_back(k);
@@ -140,6 +145,9 @@ int run_train(const std::vector<std::string>& argv) {
   const long stop = args.integer("stop-gaussians", 0);
   if (stop < 0) throw msgs::cli::UsageError("--stop-gaussians must be >= 0 (0 = never)");
   cfg.stop_gaussians = std::size_t(stop);
+  const long reorder = args.integer("reorder-every", 0);
+  if (reorder < 0 || reorder > 1000000) throw msgs::cli::UsageError("--reorder-every must be in 0..1000000 (0 = never)");
+  cfg.reorder_every = int(reorder);
   const long every = args.integer("checkpoint-every", 0);
   if (every < 0) throw msgs::cli::UsageError("--checkpoint-every must be >= 0");
   cfg.train.checkpoint_every = int(every);

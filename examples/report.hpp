@@ -125,7 +125,8 @@ inline nlohmann::json plan_json(const TrainPlan& p) {
             {"prune_scale3d", d.prune_scale3d}, {"prune_scale2d", d.prune_scale2d}, {"reset_opacity", d.reset_opacity},
             {"refine_start", d.refine_start}, {"refine_stop", d.refine_stop}, {"refine_every", d.refine_every},
             {"reset_every", d.reset_every}, {"screen_stop", d.screen_stop}, {"pause_begin", d.pause_begin},
-            {"pause_end", d.pause_end}, {"max_gaussians", d.max_gaussians}, {"stop_gaussians", d.stop_gaussians}}}};
+            {"pause_end", d.pause_end}, {"max_gaussians", d.max_gaussians}, {"stop_gaussians", d.stop_gaussians},
+            {"reorder_every", d.reorder_every}}}};
 }
 
 /// The anytime-evaluation curve: one object per point (seconds on the training clock, step, model,

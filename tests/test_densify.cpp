@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "msgs/densify.hpp"
+#include "msgs/spatial_order.hpp"
 
 using namespace msgs;
 
@@ -758,4 +759,111 @@ TEST_CASE("in-place row application equals a plain out-of-place copy for random 
       CHECK(got == want);
     }
   }
+}
+
+TEST_CASE("Morton codes: spatial order within the bounding box, ties in row order, non-finite points last") {
+  // Two clusters far apart, listed interleaved: sorted, each cluster's points are consecutive.
+  std::vector<float> pts;
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> jitter(-0.5f, 0.5f);
+  for (int i = 0; i < 20; ++i) {
+    const float cx = i % 2 == 0 ? 0.0f : 100.0f;
+    for (int a = 0; a < 3; ++a) pts.push_back(cx + jitter(rng));
+  }
+  const std::vector<std::uint32_t> order = order_by_code(morton_codes(pts.data(), 20));
+  REQUIRE(order.size() == 20);
+  for (int k = 0; k < 10; ++k) CHECK(order[std::size_t(k)] % 2 == order[0] % 2);
+  for (int k = 10; k < 20; ++k) CHECK(order[std::size_t(k)] % 2 != order[0] % 2);
+  // Along one axis the order is the order of the coordinate (x fills the lowest bit of each triple).
+  const std::vector<float> line = {3, 0, 0, 1, 0, 0, 2, 0, 0, 0, 0, 0};
+  CHECK(order_by_code(morton_codes(line.data(), 4)) == std::vector<std::uint32_t>{3, 1, 2, 0});
+  // Equal points keep their rows' order; a NaN or infinite coordinate sorts last; a single point or
+  // a flat box (zero extent on an axis) is no special case.
+  const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+  const std::vector<float> odd = {nan, 0, 0, 1, 1, 1, 0, 0, inf, 1, 1, 1, 0, 0, 0};
+  const std::vector<std::uint64_t> c = morton_codes(odd.data(), 5);
+  CHECK(c[0] == ~std::uint64_t(0));
+  CHECK(c[2] == ~std::uint64_t(0));
+  CHECK(c[1] == c[3]);
+  CHECK(order_by_code(c) == std::vector<std::uint32_t>{4, 1, 3, 0, 2});
+  const float one[3] = {5, -2, 7};
+  CHECK(morton_codes(one, 1) == std::vector<std::uint64_t>{0});
+  // Coordinates near float's limits (their extent overflows to infinity) stay finite codes.
+  const float big = std::numeric_limits<float>::max();
+  const std::vector<float> wide = {-big, 0, 0, big, 0, 0};
+  const std::vector<std::uint64_t> cw = morton_codes(wide.data(), 2);
+  CHECK(cw[0] != ~std::uint64_t(0));
+  CHECK(cw[1] != ~std::uint64_t(0));
+  CHECK(morton_codes(wide.data(), 0).empty());
+}
+
+TEST_CASE("reorder timing: every reorder_every-th refinement and the last one before a pause or the stop") {
+  DensifyConfig cfg = DensifyConfig::gsplat_default();  // refine every 100 from 500 to 15000, reset every 3000
+  CHECK(cfg.reorder_every == 0);                       // off unless asked for
+  CHECK_FALSE(DensityControl(cfg, 1, 0).reorders_at(800));
+  cfg.reorder_every = 4;
+  cfg.pause_begin = 6150;
+  cfg.pause_end = 7000;
+  const DensityControl dc(cfg, 1, 0);
+  CHECK(dc.reorders_at(800));         // a multiple of 4 x 100
+  CHECK_FALSE(dc.reorders_at(900));
+  CHECK_FALSE(dc.reorders_at(850));   // no refinement there
+  CHECK(dc.reorders_at(6100));        // the last refinement before the pause
+  CHECK_FALSE(dc.reorders_at(5900));
+  CHECK_FALSE(dc.reorders_at(6200));  // paused
+  CHECK_FALSE(dc.reorders_at(7100));  // refinements go on after the pause
+  CHECK(dc.reorders_at(14900));       // the last refinement before refine_stop
+  CHECK_FALSE(dc.reorders_at(14700));
+  CHECK_FALSE(dc.reorders_at(15200)); // past refine_stop: no refinement at all
+  cfg.reorder_every = -1;
+  CHECK_THROWS_AS(cfg.validate(), std::invalid_argument);
+  cfg.reorder_every = 1000001;
+  CHECK_THROWS_AS(cfg.validate(), std::invalid_argument);
+}
+
+TEST_CASE("a reordering refinement is the plain refinement followed by a sort of its result") {
+  // Gaussians at random places: some duplicated, some split (large), some pruned (faint).
+  const std::size_t n = 64;
+  Model m = make_model(n);
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<float> pos(-5.0f, 5.0f);
+  std::vector<double> ndc(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    for (int a = 0; a < 3; ++a) m.means[3 * i + a] = pos(rng);
+    if (i % 5 == 1) m.log_scales[3 * i] = float(std::log(0.05));  // large: split
+    if (i % 7 == 3) m.opacity_logits[i] = float(logit(0.001));    // faint: pruned
+    ndc[i] = i % 3 == 0 ? 0.01 : 0.0;
+  }
+  DensifyConfig cfg = DensifyConfig::gsplat_default();
+  Model plain = m, sorted = m;
+  Model avg_plain = make_model(n), avg_sorted = make_model(n);
+  DensityControl dp(cfg, 1, 0);
+  cfg.reorder_every = 2;
+  DensityControl ds(cfg, 1, 0);
+  REQUIRE(ds.reorders_at(1000));
+  for (DensityControl* dc : {&dp, &ds}) dc->observe(1000, 0, grads_with_ndc_norm(ndc, 64).mean2d, radii_all(n, 1), 64, 64);
+  const DensifyReport rp = dp.step_post_backward(1000, plain, avg_plain);
+  const DensifyReport rs = ds.step_post_backward(1000, sorted, avg_sorted);
+  REQUIRE(rp.refined);
+  REQUIRE(rs.refined);
+  CHECK(rs.counts.duplicated == rp.counts.duplicated);
+  CHECK(rs.counts.split == rp.counts.split);
+  CHECK(rs.counts.pruned == rp.counts.pruned);
+  CHECK(rp.counts.duplicated > 0);
+  CHECK(rp.counts.split > 0);
+  CHECK(rp.counts.pruned > 0);
+  REQUIRE(sorted.size() == plain.size());
+  sorted.check_consistent();
+  // Row f of the sorted result is row order[f] of the plain one, for the model (split samples
+  // included: their draws do not depend on where they end up) and for the optimiser state.
+  const std::vector<std::uint32_t> order = order_by_code(morton_codes(plain.means.data(), plain.size()));
+  CHECK(order != RefinePlan::identity(plain.size()).source);
+  for (std::size_t f = 0; f < sorted.size(); ++f) {
+    CHECK(same_row(sorted, f, plain, order[f]));
+    CHECK(same_row(avg_sorted, f, avg_plain, order[f]));
+    CHECK(rs.plan.source[f] == rp.plan.source[order[f]]);
+    CHECK(rs.plan.fresh[f] == rp.plan.fresh[order[f]]);
+  }
+  // The result is in spatial order: sorting it again changes nothing.
+  CHECK(order_by_code(morton_codes(sorted.means.data(), sorted.size())) == RefinePlan::identity(sorted.size()).source);
 }

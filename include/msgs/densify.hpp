@@ -17,6 +17,7 @@
 #include "msgs/detail/math.hpp"
 #include "msgs/gaussian.hpp"
 #include "msgs/schedule.hpp"
+#include "msgs/spatial_order.hpp"
 
 namespace msgs {
 
@@ -98,6 +99,18 @@ struct RefinePlan {
       for (std::size_t j : sel) p.push(j, true);
     return p;
   }
+  /// Every row, in the order `order` lists them (a permutation of 0 .. order.size() - 1).
+  static RefinePlan reorder(std::vector<std::uint32_t> order) {
+    RefinePlan p = empty_plan(order.size());
+    std::vector<bool> seen(order.size(), false);
+    for (std::uint32_t s : order) {
+      if (s >= order.size() || seen[s]) throw std::invalid_argument("RefinePlan::reorder: not a permutation");
+      seen[s] = true;
+    }
+    p.source = std::move(order);
+    p.fresh.assign(p.source.size(), false);
+    return p;
+  }
   /// All `n` rows, then `count` new zero rows for the caller to fill.
   static RefinePlan append(std::size_t n, std::size_t count) {
     RefinePlan p = identity(n);
@@ -147,6 +160,8 @@ namespace detail {
 /// array. The leading output rows that copy old rows in ascending order (the surviving Gaussians
 /// of a refinement) are compacted in place, a run of consecutive rows per memmove; the other
 /// output rows (copies, split samples, fresh rows) are staged in a buffer of their own size first.
+/// When most rows move (a refinement that also reorders), each plane is gathered through one
+/// plane-sized buffer instead.
 template <class T>
 void apply_rows_impl(const RefinePlan& plan, std::vector<T>& rows, std::size_t width, bool zero_fresh,
                      const char* what, std::size_t planes = 1, bool validated = false) {
@@ -162,6 +177,31 @@ void apply_rows_impl(const RefinePlan& plan, std::vector<T>& rows, std::size_t w
     const std::uint32_t s = plan.source[kept];
     if (s == RefinePlan::none || (zero_fresh && plan.fresh[kept]) || s < kept || (kept > 0 && s <= prev)) break;
     prev = s;
+  }
+  if (kept < m / 2) {
+    // Most rows move (a refinement that reorders): each plane is gathered into one plane-sized
+    // buffer in a parallel pass and copied to its place, the planes taken in the order that reads
+    // every old plane before its space is overwritten (the stride changes from n to m rows).
+    std::vector<T> plane(m * w);
+    if (m > n) {
+      if (planes * m * w > rows.capacity()) rows.reserve(planes * m * w + planes * m * w / 4);  // room for later growth
+      rows.resize(planes * m * w);
+    }
+    const std::ptrdiff_t sm = static_cast<std::ptrdiff_t>(m);
+    for (std::size_t i = 0; i < planes; ++i) {
+      const std::size_t q = m > n ? planes - 1 - i : i;
+      const T* from = rows.data() + q * n * w;
+#pragma omp parallel for schedule(static, 1024)
+      for (std::ptrdiff_t ff = 0; ff < sm; ++ff) {
+        const std::size_t f = static_cast<std::size_t>(ff);
+        const std::uint32_t s = plan.source[f];
+        if (s == RefinePlan::none || (zero_fresh && plan.fresh[f])) std::fill_n(plane.data() + f * w, w, T(0));
+        else std::copy_n(from + std::size_t(s) * w, w, plane.data() + f * w);
+      }
+      std::copy_n(plane.data(), m * w, rows.data() + q * m * w);
+    }
+    rows.resize(planes * m * w);
+    return;
   }
   const std::size_t tail = m - kept;
   std::vector<T> staged(planes * tail * w, T(0));  // zero for fresh rows
@@ -247,6 +287,14 @@ void apply_zero_fresh(const RefinePlan& plan, GaussianModel<G, S>& state) {
   });
 }
 
+/// The plan that puts the rows of `model` into spatial order (spatial_order.hpp), for the model and
+/// every array that follows it.
+template <class G, class S>
+RefinePlan spatial_order_plan(const GaussianModel<G, S>& model) {
+  model.check_consistent();
+  return RefinePlan::reorder(order_by_code(morton_codes(model.means.data(), model.size())));
+}
+
 // ---------------------------------------------------------------------------------------------
 // Configuration
 // ---------------------------------------------------------------------------------------------
@@ -299,6 +347,14 @@ struct DensifyConfig {
   double images_scale = 1.0;        ///< multiplies num_train_images in the automatic pause (scaled() sets it)
 
   std::uint64_t seed = 0;           ///< seed of the split samples
+  /// Sort the Gaussians into spatial order (spatial_order.hpp) as part of every reorder_every-th
+  /// refinement (steps that are multiples of reorder_every x refine_every) and of a refinement that
+  /// no other follows within that span (the last before refine_stop or a pause), so that a view's
+  /// Gaussians are runs of consecutive rows; 0 = never (rows stay in gsplat's order: survivors,
+  /// then copies, then split samples). Moves rows, changes no value, no decision and no random
+  /// draw of that refinement; later split samples, drawn per row, differ, so a run takes another
+  /// course. Counted in refinements, so that ScheduleScale leaves it alone; at most 10^6.
+  int reorder_every = 0;
 
   /// The multi-spectral implementation's defaults (splatfacto thresholds with absgrad, MSAD
   /// per-band accumulators) for the recommended 120k-step Joint run: refine every 300 from 500
@@ -379,6 +435,7 @@ struct DensifyConfig {
     if (pause_begin < 0 || pause_end < pause_begin) bad("pause_begin/pause_end", "0 <= pause_begin <= pause_end");
     if (pause_after_reset < -1) bad("pause_after_reset", ">= 0 or -1 (automatic)");
     if (!(std::isfinite(images_scale) && images_scale > 0.0)) bad("images_scale", "finite and > 0");
+    if (reorder_every < 0 || reorder_every > 1000000) bad("reorder_every", "in 0 .. 10^6 (0 = never)");
   }
 };
 
@@ -586,6 +643,19 @@ class DensityControl {
     return cfg_.reset_every <= 0 || step % cfg_.reset_every >= pause_after_reset_;
   }
 
+  /// Whether the refinement at `step` also sorts the Gaussians into spatial order
+  /// (DensifyConfig::reorder_every): a multiple of reorder_every x refine_every, or a refinement
+  /// step after which no refinement follows within that many steps. Depends on the configuration
+  /// and the step only, so a resumed run sorts where the uninterrupted one did.
+  bool reorders_at(long long step) const {
+    if (cfg_.reorder_every <= 0 || !refines_at(step)) return false;
+    const long long span = static_cast<long long>(cfg_.reorder_every) * cfg_.refine_every;
+    if (step % span == 0) return true;
+    for (long long t = step + cfg_.refine_every; t <= step + span && t < cfg_.refine_stop; t += cfg_.refine_every)
+      if (refines_at(t)) return false;
+    return true;
+  }
+
   /// Whether `step` resets opacities: a positive multiple of reset_every before refine_stop and
   /// outside the pause window (the reference stops resets there too).
   bool resets_opacity_at(long long step) const {
@@ -761,12 +831,29 @@ class DensityControl {
       counts.pruned += prune_flag[r];
     }
     const RefinePlan p_prune = RefinePlan::remove(prune);
-    plan = plan.then(p_prune);
+    // grown_row[f]: the row of the grown set that output row f holds.
+    std::vector<std::uint32_t> grown_row = p_prune.source;
+
+    // ---- spatial order of the result, from the means it will have ----
+    if (reorders_at(step)) {
+      const std::size_t m = p_prune.size();
+      std::vector<S> out_mean(3 * m);
+      for (std::size_t f = 0; f < m; ++f) {
+        const std::size_t r = grown_row[f];
+        const S* src = r < rest ? &model.means[3 * std::size_t(plan.source[r])] : &sample_mean[3 * (r - rest)];
+        std::copy_n(src, 3, &out_mean[3 * f]);
+      }
+      const std::vector<std::uint32_t> order = order_by_code(morton_codes(out_mean.data(), m));
+      for (std::size_t f = 0; f < m; ++f) grown_row[f] = p_prune.source[order[f]];
+    }
+    RefinePlan p_out = p_prune;  // the kept rows of the grown set, in output order
+    p_out.source = grown_row;
+    plan = plan.then(p_out);
 
     // ---- apply once, then place the split samples' means and scales ----
     apply(plan, model);
-    for (std::size_t f = 0; f < p_prune.size(); ++f) {
-      const std::size_t r = p_prune.source[f];
+    for (std::size_t f = 0; f < grown_row.size(); ++f) {
+      const std::size_t r = grown_row[f];
       if (r < rest) continue;
       std::copy_n(&sample_mean[3 * (r - rest)], 3, &model.means[3 * f]);
       std::copy_n(&sample_log_scale[3 * (r - rest)], 3, &model.log_scales[3 * f]);

@@ -41,6 +41,11 @@ struct RunConfig {
   /// Stop the run with DensifyLimitError when a refinement would grow a model beyond this many
   /// Gaussians (DensifyConfig::stop_gaussians; 0 = never). Changes no result.
   std::size_t stop_gaussians = 0;
+  /// Sort the models into spatial order at every reorder_every-th refinement and at the last one
+  /// before a pause or the end of densification (DensifyConfig::reorder_every; 0 = never, keeping
+  /// gsplat's row order). A speed setting: rows move, values do not, but the split samples'
+  /// offsets are drawn per row, so a run takes another (equally likely) course.
+  int reorder_every = 0;
   /// Resolution schedule: training images start downscaled by 2^num_downscales and double in
   /// resolution every `resolution_every` steps (TrainSchedule); -1 keeps the strategy's
   /// (splatfacto's 2, a quarter of the resolution at first), 0 trains at full resolution throughout.
@@ -235,6 +240,7 @@ RunResult run_experiment(const io::Dataset& ds, const RunConfig& cfg, const std:
   StrategySpec spec = parse_strategy(cfg.strategy, scale, cfg.densify);
   spec.plan.densify.max_gaussians = cfg.max_gaussians;
   spec.plan.densify.stop_gaussians = cfg.stop_gaussians;
+  spec.plan.densify.reorder_every = cfg.reorder_every;
   if (cfg.num_downscales >= 0) spec.plan.schedule.num_downscales = cfg.num_downscales;
   RunResult res;
   res.exposure = cfg.train.exposure;
