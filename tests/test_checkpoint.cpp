@@ -15,6 +15,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <string>
 
 #include <omp.h>
 
@@ -62,34 +63,37 @@ void check_same(const TrainState<G>& a, const TrainState<G>& b) {
   CHECK(a.stats_count == b.stats_count);
 }
 
+constexpr long long kEnd = 240, kStop = 131;  // the stop falls between refinements
+
+/// A run to kEnd interrupted at kStop by the stop flag (as Ctrl-C does, the checkpoint `name`
+/// written on the way out), then resumed from that checkpoint in a fresh trainer: its end state.
+TrainState<G> interrupted_and_resumed(const std::string& name, bool sparse, int reorder) {
+  const fs::path ckpt = scratch() / name;
+  fs::remove(ckpt);
+  std::atomic<bool> stop{false};
+  TrainOptions opt;
+  opt.checkpoint_path = ckpt;
+  opt.stop = &stop;
+  opt.progress_every = 1;
+  opt.on_progress = [&](const TrainProgress& p) { if (p.step >= kStop) stop.store(true); };
+  Trainer<G> first = make_trainer(opt, sparse, reorder);
+  REQUIRE(first.train(0, kEnd) == kStop);
+  REQUIRE(fs::exists(ckpt));
+  Trainer<G> second = make_trainer({}, sparse, reorder);
+  const long long at = second.restore(load_checkpoint<G>(ckpt));
+  CHECK(at == kStop);
+  REQUIRE(second.train(at, kEnd) == kEnd);
+  return second.state(kEnd);
+}
+
 }  // namespace
 
 TEST_CASE("a resumed run equals the uninterrupted run bit for bit, with sparse and with dense Adam") {
-  constexpr long long kEnd = 240, kStop = 131;  // the stop falls between refinements
   for (const bool sparse : {true, false}) {
     INFO("sparse ", sparse);
     Trainer<G> straight = make_trainer({}, sparse);
     REQUIRE(straight.train(0, kEnd) == kEnd);
-    const TrainState<G> want = straight.state(kEnd);
-
-    // Interrupted run: stopped by the flag (as Ctrl-C does), checkpoint written on the way out.
-    const fs::path ckpt = scratch() / "joint.ckpt";
-    fs::remove(ckpt);
-    std::atomic<bool> stop{false};
-    TrainOptions opt;
-    opt.checkpoint_path = ckpt;
-    opt.stop = &stop;
-    opt.progress_every = 1;
-    opt.on_progress = [&](const TrainProgress& p) { if (p.step >= kStop) stop.store(true); };
-    Trainer<G> first = make_trainer(opt, sparse);
-    REQUIRE(first.train(0, kEnd) == kStop);
-    REQUIRE(fs::exists(ckpt));
-
-    Trainer<G> second = make_trainer({}, sparse);
-    const long long at = second.restore(load_checkpoint<G>(ckpt));
-    CHECK(at == kStop);
-    REQUIRE(second.train(at, kEnd) == kEnd);
-    check_same(second.state(kEnd), want);
+    check_same(interrupted_and_resumed("joint.ckpt", sparse, 0), straight.state(kEnd));
   }
 }
 
@@ -112,7 +116,6 @@ TEST_CASE("training is bit-identical for 1 and 2 threads, sparse and dense; the 
 }
 
 TEST_CASE("with spatial reordering a resumed run equals the uninterrupted one, and 1 and 2 threads agree") {
-  constexpr long long kEnd = 240, kStop = 131;
   constexpr int kReorder = 2;  // every second refinement: a sort every 12 steps
   const int saved = omp_get_max_threads();
   omp_set_num_threads(1);
@@ -124,19 +127,7 @@ TEST_CASE("with spatial reordering a resumed run equals the uninterrupted one, a
   const TrainState<G> want = straight.state(kEnd);
   check_same(one.state(kEnd), want);
 
-  const fs::path ckpt = scratch() / "reordered.ckpt";
-  fs::remove(ckpt);
-  std::atomic<bool> stop{false};
-  TrainOptions opt;
-  opt.checkpoint_path = ckpt;
-  opt.stop = &stop;
-  opt.progress_every = 1;
-  opt.on_progress = [&](const TrainProgress& p) { if (p.step >= kStop) stop.store(true); };
-  Trainer<G> first = make_trainer(opt, false, kReorder);
-  REQUIRE(first.train(0, kEnd) == kStop);
-  Trainer<G> second = make_trainer({}, false, kReorder);
-  REQUIRE(second.train(second.restore(load_checkpoint<G>(ckpt)), kEnd) == kEnd);
-  check_same(second.state(kEnd), want);
+  check_same(interrupted_and_resumed("reordered.ckpt", false, kReorder), want);
   omp_set_num_threads(saved);
   // The sorts happened: consecutive rows are mostly in Morton order, unlike gsplat's row order.
   const auto descents = [](const GaussianModel<G, float>& m) {
