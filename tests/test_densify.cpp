@@ -788,12 +788,15 @@ TEST_CASE("Morton codes: spatial order within the bounding box, ties in row orde
   CHECK(order_by_code(c) == std::vector<std::uint32_t>{4, 1, 3, 0, 2});
   const float one[3] = {5, -2, 7};
   CHECK(morton_codes(one, 1) == std::vector<std::uint64_t>{0});
-  // Coordinates near float's limits (their extent overflows to infinity) stay finite codes.
+  // Coordinates at float's limits still get finite codes (and so do doubles whose extent overflows).
   const float big = std::numeric_limits<float>::max();
   const std::vector<float> wide = {-big, 0, 0, big, 0, 0};
   const std::vector<std::uint64_t> cw = morton_codes(wide.data(), 2);
   CHECK(cw[0] != ~std::uint64_t(0));
   CHECK(cw[1] != ~std::uint64_t(0));
+  const double dbig = std::numeric_limits<double>::max();
+  const std::vector<double> dwide = {-dbig, 0, 0, dbig, 0, 0};
+  CHECK(morton_codes(dwide.data(), 2) == std::vector<std::uint64_t>{0, 0});
   CHECK(morton_codes(wide.data(), 0).empty());
 }
 

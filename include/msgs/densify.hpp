@@ -818,7 +818,7 @@ class DensityControl {
       const S* ls = r < rest ? &model.log_scales[3 * src] : &sample_log_scale[3 * (r - rest)];
       const double o = detail::sigmoid(double(model.opacity_logits[src]));
       bool p = o < cfg_.prune_opacity || !row_finite(model, src) ||  // a NaN row would never recover
-               (r >= rest && !(finite3(&sample_mean[3 * (r - rest)]) && finite3(ls)));
+               (r >= rest && !(detail::finite_point(&sample_mean[3 * (r - rest)]) && detail::finite_point(ls)));
       if (after_reset) {
         p = p || max_scale(ls) > big_limit;
         if (screen) p = p || double(radius[r]) > cfg_.prune_scale2d;
@@ -916,11 +916,6 @@ class DensityControl {
   }
   template <class G, class S>
   static double max_scale(const GaussianModel<G, S>& m, std::size_t i) { return max_scale(&m.log_scales[3 * i]); }
-
-  template <class S>
-  static bool finite3(const S* v) {
-    return std::isfinite(double(v[0])) && std::isfinite(double(v[1])) && std::isfinite(double(v[2]));
-  }
 
   template <class G, class S>
   static bool row_finite(const GaussianModel<G, S>& m, std::size_t i) {

@@ -4,9 +4,9 @@
 // space; with the rows in this order the Gaussians it sees form runs of consecutive rows instead
 // of being scattered over the whole model, so the stages that work on the rows a view saw (the
 // gradient reduction, the projection and colour backward, the zeroing of unseen gradients, the
-// statistics) read and write whole cache lines, and the projection can skip the colour of a whole
-// vector of Gaussians that are all out of view. Densification (DensifyConfig::reorder_every)
-// keeps a trained model in this order.
+// statistics) read and write whole cache lines, and the projection rejects whole vectors of
+// Gaussians that are all out of view before their covariance and colour. Densification keeps a
+// model in this order when DensifyConfig::reorder_every asks for it.
 #pragma once
 
 #include <algorithm>
@@ -31,6 +31,7 @@ inline std::uint64_t spread_bits3(std::uint64_t v) {
   return v;
 }
 
+/// All three coordinates of p finite.
 template <class S>
 inline bool finite_point(const S* p) {
   return std::isfinite(double(p[0])) && std::isfinite(double(p[1])) && std::isfinite(double(p[2]));
@@ -56,7 +57,7 @@ std::vector<std::uint64_t> morton_codes(const S* means, std::size_t n) {
   constexpr double kCells = double(1u << 21);
   double scale[3];
   for (int a = 0; a < 3; ++a) {
-    // A huge extent (finite, but beyond double's range when subtracted) collapses to one cell.
+    // An extent beyond double's range (hi - lo overflows) collapses the axis to one cell.
     const double extent = hi[a] - lo[a];
     scale[a] = extent > 0.0 && std::isfinite(extent) ? (kCells - 1.0) / extent : 0.0;
   }
@@ -69,7 +70,8 @@ std::vector<std::uint64_t> morton_codes(const S* means, std::size_t n) {
     }
     std::uint64_t c = 0;
     for (int a = 0; a < 3; ++a) {
-      const double q = std::clamp((double(p[a]) - lo[a]) * scale[a], 0.0, kCells - 1.0);
+      // (On a collapsed axis p - lo may itself overflow, and inf x 0 would be NaN.)
+      const double q = scale[a] > 0.0 ? std::clamp((double(p[a]) - lo[a]) * scale[a], 0.0, kCells - 1.0) : 0.0;
       c |= detail::spread_bits3(std::uint64_t(q)) << a;
     }
     code[i] = c;
