@@ -67,9 +67,9 @@ constexpr const char* kUsage =
     "                    instead of running out of memory; below the limit results are unchanged\n"
     "  --reorder-every N sort the Gaussians into spatial order at every N-th refinement and at the\n"
     "                    last before a pause or the end of densification, so that the Gaussians a\n"
-    "                    view sees are neighbours in memory (8 made the demo 1.01-1.18x faster;\n"
-    "                    default 0: gsplat's row order). It moves rows, not values, but the split\n"
-    "                    samples' offsets are drawn per row, so a run takes another course\n"
+    "                    view sees are neighbours in memory (default 8; 0 keeps gsplat's row\n"
+    "                    order). A speed setting only: the trained Gaussians are the same, bit\n"
+    "                    for bit, in another order\n"
     MSGS_TRAIN_OPTIONS_USAGE
     "  --exposure        learn a per-image exposure correction: a gain exp(a_c) and an offset b_c per\n"
     "                    channel of every training image, applied to its render before the loss\n"
@@ -145,7 +145,7 @@ int run_train(const std::vector<std::string>& argv) {
   const long stop = args.integer("stop-gaussians", 0);
   if (stop < 0) throw msgs::cli::UsageError("--stop-gaussians must be >= 0 (0 = never)");
   cfg.stop_gaussians = std::size_t(stop);
-  const long reorder = args.integer("reorder-every", 0);
+  const long reorder = args.integer("reorder-every", cfg.reorder_every);
   if (reorder < 0 || reorder > 1000000) throw msgs::cli::UsageError("--reorder-every must be in 0..1000000 (0 = never)");
   cfg.reorder_every = int(reorder);
   const long every = args.integer("checkpoint-every", 0);

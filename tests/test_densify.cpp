@@ -802,7 +802,10 @@ TEST_CASE("Morton codes: spatial order within the bounding box, ties in row orde
 
 TEST_CASE("reorder timing: every reorder_every-th refinement and the last one before a pause or the stop") {
   DensifyConfig cfg = DensifyConfig::gsplat_default();  // refine every 100 from 500 to 15000, reset every 3000
-  CHECK(cfg.reorder_every == 0);                       // off unless asked for
+  CHECK(cfg.reorder_every == 8);                       // on by default: it changes no result
+  CHECK(DensityControl(cfg, 1, 0).reorders_at(800));
+  CHECK_FALSE(DensityControl(cfg, 1, 0).reorders_at(400));
+  cfg.reorder_every = 0;                               // gsplat's row order
   CHECK_FALSE(DensityControl(cfg, 1, 0).reorders_at(800));
   cfg.reorder_every = 4;
   cfg.pause_begin = 6150;

@@ -1,7 +1,7 @@
 // include/msgs/bin.hpp
 // Stage 2 of the rasteriser: bin visible Gaussians into 16x16 screen tiles and sort each tile's
-// list front to back. Deterministic for any thread count: one global depth sort (ties by index)
-// followed by a stable, fixed-chunk counting sort by tile.
+// list front to back. Deterministic for any thread count: one global depth sort (ties by a key
+// the caller gives, then by index) followed by a stable, fixed-chunk counting sort by tile.
 #pragma once
 
 #include <algorithm>
@@ -152,11 +152,20 @@ inline void radix_sort_by_key(std::vector<std::uint64_t>& keys, std::vector<std:
 /// How many Gaussians ahead bin_gaussians prefetches what it reads out of order.
 inline constexpr std::int64_t kBinPrefetch = 16;
 
+/// No tie key: Gaussians at exactly the same depth stay ordered by id.
+struct TiesById {
+  std::uint64_t operator()(std::uint32_t) const { return 0; }
+};
+
 /// Bin the visible Gaussians. `visible_ids` [V] in increasing order, `depth` [N] camera z,
 /// `rects` [N] pixel rectangles (non-empty for every visible id).
-template <class S>
+/// `tie_key(g)`: orders Gaussians at exactly the same depth (then by id). With a key that depends
+/// on a Gaussian's parameters instead of its row (Rasterizer: the bits of its mean), the blend
+/// order, and so the image, does not depend on the order of the model's rows. Called only for
+/// Gaussians that tie, a handful per frame.
+template <class S, class TieKey = TiesById>
 inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S* depth, const PixelRect* rects,
-                          const TileGrid& grid, Binning& out) {
+                          const TileGrid& grid, Binning& out, const TieKey& tie_key = {}) {
   constexpr int TS = TileGrid::kTileSize;
   const std::size_t V = visible_ids.size();
   const int tiles = grid.count();
@@ -180,6 +189,21 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
     out.pair_offset[v + 1] = std::uint64_t(r.x1 / TS - r.x0 / TS + 1) * std::uint64_t(r.y1 / TS - r.y0 / TS + 1);
   }
   detail::radix_sort_by_key(sc.keys, sc.pos, int(sizeof(S)), sc.keys2, sc.pos2, sc.hist);
+  if constexpr (!std::is_same_v<TieKey, TiesById>) {
+    // Runs of equal depth keys, ordered by (tie key, id); positions are increasing ids within a run.
+    for (std::size_t i = 0; i + 1 < V;) {
+      std::size_t e = i + 1;
+      while (e < V && sc.keys[e] == sc.keys[i]) ++e;
+      if (e - i > 1) {
+        const auto by_key = [&](std::uint32_t a, std::uint32_t b) {
+          const std::uint64_t ka = tie_key(visible_ids[a]), kb = tie_key(visible_ids[b]);
+          return ka != kb ? ka < kb : a < b;
+        };
+        std::sort(sc.pos.begin() + std::ptrdiff_t(i), sc.pos.begin() + std::ptrdiff_t(e), by_key);
+      }
+      i = e;
+    }
+  }
   // The order and the tile rectangles in that order, gathered once so that the two passes below
   // read them sequentially. In depth order the ids jump over the whole model: the rectangle a few
   // iterations ahead is prefetched (at a million Gaussians nearly every read would otherwise miss

@@ -351,10 +351,12 @@ struct DensifyConfig {
   /// refinement (steps that are multiples of reorder_every x refine_every) and of a refinement that
   /// no other follows within that span (the last before refine_stop or a pause), so that a view's
   /// Gaussians are runs of consecutive rows; 0 = never (rows stay in gsplat's order: survivors,
-  /// then copies, then split samples). Moves rows, changes no value, no decision and no random
-  /// draw of that refinement; later split samples, drawn per row, differ, so a run takes another
-  /// course. Counted in refinements, so that ScheduleScale leaves it alone; at most 10^6.
-  int reorder_every = 0;
+  /// then copies, then split samples). It moves rows and nothing else: split samples draw from the
+  /// parent's values (content_key), not its row, and the trainer's rasteriser orders Gaussians at
+  /// equal depth by their means (RasterOptions::ties_by_mean), so a run with it holds the same
+  /// Gaussians, bit for bit, as the run without, in another order (test_checkpoint). Counted in refinements, so that ScheduleScale leaves it
+  /// alone; at most 10^6.
+  int reorder_every = 8;
 
   /// The multi-spectral implementation's defaults (splatfacto thresholds with absgrad, MSAD
   /// per-band accumulators) for the recommended 120k-step Joint run: refine every 300 from 500
@@ -600,7 +602,8 @@ struct DensifyReport {
 ///     dc.observe_gradients(step, band, grads, raster.radii(), cam.width, cam.height);
 ///     auto rep = dc.step_post_backward(step, model, adam.exp_avg, adam.exp_avg_sq);
 ///
-/// Everything is deterministic: split samples are hashes of (seed, step, row, sample, axis).
+/// Everything is deterministic: split samples are hashes of (seed, step, the parent's geometry bits,
+/// sample, axis), so that they do not depend on where a Gaussian's row is.
 class DensityControl {
  public:
   /// `num_bands`: bands a training step may render (accumulators per band when cfg.per_band);
@@ -768,7 +771,7 @@ class DensityControl {
         split[i] = flags[i] & 2;
       }
     }
-    if (cfg_.max_gaussians > 0) limit_growth(n, dup, split);
+    if (cfg_.max_gaussians > 0) limit_growth(model, dup, split);
     for (std::size_t i = 0; i < n; ++i) {
       counts.duplicated += dup[i];
       counts.split += split[i];
@@ -794,11 +797,12 @@ class DensityControl {
     // Sample rows: the parent's mean moved by an offset drawn in its frame, scales divided.
     std::vector<S> sample_mean(samples * 3), sample_log_scale(samples * 3);
     const double dlog = std::log(cfg_.split_scale_divisor);
+    const std::vector<std::uint64_t> draw_key = split_draw_keys(model, sel);
     for (std::size_t j = 0; j < sel.size(); ++j)
       for (int k = 0; k < cfg_.split_samples; ++k) {
         const std::size_t c = static_cast<std::size_t>(k) * sel.size() + j, parent = sel[j];
         double offset[3];
-        sample_offset(model, parent, step, k, offset);
+        sample_offset(model, parent, draw_key[j], step, k, offset);
         for (std::size_t a = 0; a < 3; ++a) {
           sample_mean[c * 3 + a] = static_cast<S>(double(model.means[parent * 3 + a]) + offset[a]);
           sample_log_scale[c * 3 + a] = static_cast<S>(double(model.log_scales[parent * 3 + a]) - dlog);
@@ -879,7 +883,9 @@ class DensityControl {
   /// Gaussian, a split split_samples - 1, a Gaussian both duplicated and split split_samples.
   /// Candidates are taken by decreasing average gradient (index order among equals), so the
   /// choice is deterministic and independent of thread count.
-  void limit_growth(std::size_t n, std::vector<bool>& dup, std::vector<bool>& split) const {
+  template <class G, class S>
+  void limit_growth(const GaussianModel<G, S>& model, std::vector<bool>& dup, std::vector<bool>& split) const {
+    const std::size_t n = model.size();
     const std::size_t per_split = static_cast<std::size_t>(cfg_.split_samples) - 1;
     auto growth_of = [&](std::size_t i) { return (dup[i] ? 1u : 0u) + (split[i] ? per_split : 0u); };
     std::size_t want = 0;
@@ -891,8 +897,18 @@ class DensityControl {
       }
     const std::size_t budget = n >= cfg_.max_gaussians ? 0 : cfg_.max_gaussians - n;
     if (want <= budget) return;
-    std::stable_sort(cand.begin(), cand.end(),
-                     [&](std::size_t a, std::size_t b) { return stats_.max_average(a) > stats_.max_average(b); });
+    // Equal gradients are ordered by the Gaussians' values, not their rows (content_key), so that
+    // the choice does not depend on the row order (only bit-identical Gaussians stay in row order).
+    std::vector<std::uint64_t> key(cand.size());
+    for (std::size_t j = 0; j < cand.size(); ++j) key[j] = content_key(model, cand[j]);
+    std::vector<std::size_t> order(cand.size());
+    for (std::size_t j = 0; j < order.size(); ++j) order[j] = j;
+    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+      const auto ga = stats_.max_average(cand[a]), gb = stats_.max_average(cand[b]);
+      return ga != gb ? ga > gb : key[a] < key[b];
+    });
+    for (std::size_t& j : order) j = cand[j];
+    cand.swap(order);
     std::size_t used = 0;
     for (std::size_t i : cand) {
       const std::size_t g = growth_of(i);
@@ -932,9 +948,53 @@ class DensityControl {
     return true;
   }
 
-  /// Offset of split sample k of row i: R (s * z) with z ~ N(0, I) in the Gaussian's local frame.
+  /// What a split sample's random draw is keyed by instead of the row: a hash of the bits of
+  /// everything a sample inherits from its parent (mean, log-scales, rotation, opacity, colour). A permutation of the rows (the
+  /// spatial order) then changes no draw, so a run with reordering takes the same course as one
+  /// without (split_draw_keys separates Gaussians of identical geometry).
   template <class G, class S>
-  void sample_offset(const GaussianModel<G, S>& m, std::size_t i, long long step, int k, double* out) const {
+  static std::uint64_t content_key(const GaussianModel<G, S>& m, std::size_t i) {
+    std::uint64_t h = 0x6d73677373706c74ULL;
+    const auto mix = [&h](const S* p, std::size_t n) {
+      for (std::size_t j = 0; j < n; ++j) {
+        std::uint64_t bits = 0;
+        std::memcpy(&bits, p + j, sizeof(S));
+        h = detail::sched_mix(h ^ bits);
+      }
+    };
+    mix(&m.means[3 * i], 3);
+    mix(&m.log_scales[3 * i], 3);
+    mix(&m.quats[4 * i], 4);
+    mix(&m.opacity_logits[i], 1);
+    for (int c = 0; c < G::bands; ++c) mix(m.sh_row(i, c), static_cast<std::size_t>(G::sh_coeffs));
+    return h;
+  }
+
+  /// The key of each split parent's draws (rows `sel`): its content_key, and among parents with
+  /// the same content (copies that have not moved yet) its rank in row order. Identical parents
+  /// then still draw independent samples, and since they are identical, which of them takes
+  /// which draw does not show in the result.
+  template <class G, class S>
+  static std::vector<std::uint64_t> split_draw_keys(const GaussianModel<G, S>& model, const std::vector<std::size_t>& sel) {
+    std::vector<std::uint64_t> key(sel.size());
+    for (std::size_t j = 0; j < sel.size(); ++j) key[j] = content_key(model, sel[j]);
+    std::vector<std::size_t> order(sel.size());
+    for (std::size_t j = 0; j < order.size(); ++j) order[j] = j;
+    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return key[a] < key[b]; });
+    std::vector<std::uint64_t> out(sel.size());
+    std::uint64_t rank = 0;
+    for (std::size_t q = 0; q < order.size(); ++q) {
+      rank = q > 0 && key[order[q]] == key[order[q - 1]] ? rank + 1 : 0;
+      out[order[q]] = detail::sched_mix(key[order[q]] ^ detail::sched_mix(rank));
+    }
+    return out;
+  }
+
+  /// Offset of split sample k of row i: R (s * z) with z ~ N(0, I) in the Gaussian's local frame,
+  /// z drawn from (seed, step, `who` = the parent's split_draw_keys entry, sample, axis).
+  template <class G, class S>
+  void sample_offset(const GaussianModel<G, S>& m, std::size_t i, std::uint64_t who, long long step, int k,
+                     double* out) const {
     double q[4] = {double(m.quats[4 * i]), double(m.quats[4 * i + 1]), double(m.quats[4 * i + 2]), double(m.quats[4 * i + 3])};
     const double qn = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
     if (!(qn > 1e-12) || !std::isfinite(qn)) {
@@ -951,8 +1011,8 @@ class DensityControl {
       // Clamped exponent: an absurd log-scale still gives a finite (if useless) sample.
       const double s = std::exp(std::min(double(m.log_scales[3 * i + std::size_t(a)]), 30.0));
       const auto key = static_cast<std::uint64_t>(k * 3 + a);
-      const double zn = detail::sched_normal(detail::sched_hash(cfg_.seed, 0xD5ULL, step, i, key, 0),
-                                             detail::sched_hash(cfg_.seed, 0xD5ULL, step, i, key, 1));
+      const double zn = detail::sched_normal(detail::sched_hash(cfg_.seed, 0xD5ULL, step, who, key, 0),
+                                             detail::sched_hash(cfg_.seed, 0xD5ULL, step, who, key, 1));
       local[a] = std::isfinite(s) ? s * zn : 0.0;
     }
     for (int r = 0; r < 3; ++r) out[r] = R[r][0] * local[0] + R[r][1] * local[1] + R[r][2] * local[2];

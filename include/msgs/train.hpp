@@ -34,9 +34,10 @@
 namespace msgs {
 
 /// The trainer's rasteriser features: absgrad on, since the default densification (and MSAD)
-/// reads it; single-precision projection (the hard cases in double); evaluation uses the same type
+/// reads it; single-precision projection (the hard cases in double); ties in depth ordered by the
+/// means, so that the spatial order of the rows changes no result; evaluation uses the same type
 /// so the forward is compiled once.
-inline constexpr RasterOptions kTrainRaster{.absgrad = true, .single_precision = true};
+inline constexpr RasterOptions kTrainRaster{.absgrad = true, .single_precision = true, .ties_by_mean = true};
 
 /// A band as one trainer sees it: which model channels render it and which frames show it.
 struct TrainBand {
