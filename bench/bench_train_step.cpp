@@ -156,13 +156,21 @@ constexpr RasterOptions kStepRaster{.absgrad = true, .single_precision = true};
 /// One training step of a model of type G rendering channels [first, first + count). Every call
 /// into the library a step makes is in this struct (constructor, step, touched), so that an API
 /// change is adapted here only.
+/// How the step updates what the view did not see. `dense`: as Trainer::train with dense Adam, the
+/// unseen gradient rows never written and taken as zero by Adam (Unlisted::zero_gradient), except
+/// at a step of the scale regulariser; `dense_zeroed`: the same update with the unseen rows zeroed
+/// by the backward and read by Adam (GradientFill::dense, the formulation before 2026-11-25, the
+/// same bits); `sparse`: TrainOptions::sparse, gradients, Adam and the regulariser for the visible
+/// rows only.
+enum class AdamMode { dense, dense_zeroed, sparse };
+
 template <class G>
 struct StepBench {
   GaussianModel<G, float> model;
   Camera<float> cam;
   Image<float> gt;
   int first, count;
-  bool sparse;  ///< TrainOptions::sparse: gradients, Adam and the regulariser for the visible rows only
+  AdamMode mode;
   Adam<G, float> adam;
   DensityControl density;
   Rasterizer<G, float, kStepRaster> raster;
@@ -185,14 +193,14 @@ struct StepBench {
     return c;
   }
 
-  StepBench(const SceneSpec& spec, Variant v, int first_channel, int channels, bool sparse_step)
+  StepBench(const SceneSpec& spec, Variant v, int first_channel, int channels, AdamMode adam_mode)
       : model(scene_model<G>(spec, v != Variant::full, v == Variant::half_ordered)),
         cam(bench::family_camera<float>(spec)),
         // The target: a fixed seeded image in [0, 1) with the rendered band's channels.
         gt(bench::family_image_grad<float>(spec, channels)),
         first(first_channel),
         count(channels),
-        sparse(sparse_step),
+        mode(adam_mode),
         adam(AdamConfig{}, model.size()),
         density(densify_config(), G::bands, /*num_train_images=*/100) {}
 
@@ -215,13 +223,16 @@ struct StepBench {
     psnr_value = psnr(render, gt);
     const auto t2 = clock::now();
     const std::vector<std::uint32_t>& seen = raster.visible();
-    const std::vector<std::uint32_t>* rows = sparse ? &seen : nullptr;
-    raster.backward(d_image, nullptr, nullptr, grads, sparse ? GradientFill::visible : GradientFill::dense);
-    if (step_index % 10 == 0)  // TrainOptions::scale_reg_every
+    const bool reg_step = step_index % 10 == 0;  // TrainOptions::scale_reg_every
+    const bool sparse = mode == AdamMode::sparse;
+    const bool seen_only = sparse || (mode == AdamMode::dense && !reg_step);
+    const std::vector<std::uint32_t>* rows = seen_only ? &seen : nullptr;
+    raster.backward(d_image, nullptr, nullptr, grads, seen_only ? GradientFill::visible : GradientFill::dense);
+    if (reg_step)
       scale_reg<float>(std::span<const float>(model.log_scales), std::span<float>(grads.model.log_scales),
                        ScaleRegConfig{}, rows);
     const auto t3 = clock::now();
-    adam.step(model, grads.model, AdamMask::band(first, count), rows);
+    adam.step(model, grads.model, AdamMask::band(first, count), rows, sparse ? Unlisted::untouched : Unlisted::zero_gradient);
     const auto t4 = clock::now();
     if (density.accumulates_at(step_index))
       density.observe_gradients(step_index, first, grads, raster.radii(), cam.width, cam.height, &seen);
@@ -236,17 +247,17 @@ struct StepBench {
 
   /// Gaussians whose parameters and moments the step reads and writes: all of them for dense Adam
   /// (every row moves, seen or not), the visible ones for a sparse step.
-  std::size_t touched() const { return sparse ? raster.visible_count() : model.size(); }
+  std::size_t touched() const { return mode == AdamMode::sparse ? raster.visible_count() : model.size(); }
   std::size_t visible() const { return raster.visible_count(); }
 };
 
 template <class G>
-void bm_train_step(benchmark::State& st, int size, Variant v, int threads, int first, int count, bool sparse) {
+void bm_train_step(benchmark::State& st, int size, Variant v, int threads, int first, int count, AdamMode mode) {
   omp_set_num_threads(threads);
   const double gbps = triad_gbps(threads);
   omp_set_num_threads(threads);
   const SceneSpec spec = spec_of(size);
-  StepBench<G> b(spec, v, first, count, sparse);
+  StepBench<G> b(spec, v, first, count, mode);
   b.step();  // allocate the rasteriser, loss and gradient buffers before timing
   b.stages = {};
   b.raster.timings().reset();
@@ -297,12 +308,13 @@ void tune(benchmark::internal::Benchmark* b, int size) {
 
 template <class G>
 void register_case(const std::string& tag, int size, Variant v, int threads, int first, int count) {
-  for (const bool sparse : {false, true}) {
-    const std::string name = "train_step/" + tag + "/" + kSizes[size].name + suffix(v) +
-                             (sparse ? "/sparse" : "/dense") + "/threads:" + std::to_string(threads);
+  for (const AdamMode mode : {AdamMode::dense, AdamMode::dense_zeroed, AdamMode::sparse}) {
+    const char* mode_name = mode == AdamMode::dense ? "/dense" : mode == AdamMode::dense_zeroed ? "/dense_zeroed" : "/sparse";
+    const std::string name = "train_step/" + tag + "/" + kSizes[size].name + suffix(v) + mode_name + "/threads:" +
+                             std::to_string(threads);
     tune(benchmark::RegisterBenchmark(name.c_str(),
                                       [=](benchmark::State& st) {
-                                        bm_train_step<G>(st, size, v, threads, first, count, sparse);
+                                        bm_train_step<G>(st, size, v, threads, first, count, mode);
                                       }),
          size);
   }

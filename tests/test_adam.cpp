@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 #include <cstdint>
+#include <cstring>
 #include <random>
 #include <vector>
 
@@ -260,4 +261,73 @@ TEST_CASE("sparse Adam: listed rows update as dense Adam does, other rows and th
   const std::vector<std::uint32_t> unsorted = {3, 1}, outside = {2, 11};
   CHECK_THROWS_AS(sparse.step(ps, g, mask, &unsorted), std::invalid_argument);
   CHECK_THROWS_AS(sparse.step(ps, g, mask, &outside), std::invalid_argument);
+}
+
+TEST_CASE("Unlisted::zero_gradient: dense Adam bit for bit, without reading the unlisted gradient rows") {
+  // More rows than one parallel chunk (2048), listed rows in runs of every length, across chunk
+  // boundaries, at both ends.
+  const std::size_t n = 5000;
+  Model p(n), g(n);
+  fill_random(p, 31, -1.0f, 1.0f);
+  msgs::Adam<G7> dense({}, n);
+  fill_random(g, 32, -1.0f, 1.0f);
+  dense.step(p, g);  // warm moments everywhere
+  msgs::Adam<G7> lazy = dense;
+  Model pl = p;
+  std::vector<std::uint32_t> rows;
+  std::mt19937 rng(33);
+  for (std::uint32_t i = 0; i < n;) {
+    const std::uint32_t run = 1 + rng() % 300, gap = rng() % 200;
+    for (std::uint32_t r = i; r < std::min<std::uint32_t>(std::uint32_t(n), i + run); ++r) rows.push_back(r);
+    i += run + gap;
+  }
+  for (std::uint32_t r : {2046u, 2047u, 2048u, 4095u, 4999u})
+    if (!std::binary_search(rows.begin(), rows.end(), r)) rows.insert(std::lower_bound(rows.begin(), rows.end(), r), r);
+  std::vector<bool> listed(n, false);
+  for (std::uint32_t r : rows) listed[r] = true;
+  REQUIRE(rows.size() > n / 3);
+  REQUIRE(rows.size() < n);
+  fill_random(g, 34, -1.0f, 1.0f);
+  Model gz = g, gl = g;  // dense: zeros where not listed; lazy: NaN there, which it must not read
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  for (std::size_t i = 0; i < n; ++i) {
+    if (listed[i]) continue;
+    for (int a = 0; a < 3; ++a) {
+      gz.means[3 * i + std::size_t(a)] = gz.log_scales[3 * i + std::size_t(a)] = 0.0f;
+      gl.means[3 * i + std::size_t(a)] = gl.log_scales[3 * i + std::size_t(a)] = nan;
+    }
+    for (int a = 0; a < 4; ++a) {
+      gz.quats[4 * i + std::size_t(a)] = 0.0f;
+      gl.quats[4 * i + std::size_t(a)] = nan;
+    }
+    gz.opacity_logits[i] = 0.0f;
+    gl.opacity_logits[i] = nan;
+    for (int c = 0; c < 7; ++c)
+      for (int k = 0; k < G7::sh_coeffs; ++k) {
+        gz.sh_at(i, k, c) = 0.0f;
+        gl.sh_at(i, k, c) = nan;
+      }
+  }
+  const auto bits = [](const std::vector<float>& a, const std::vector<float>& b) {
+    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0;
+  };
+  for (const msgs::AdamMask mask : {msgs::AdamMask::band(2, 3), msgs::AdamMask::all(), msgs::AdamMask::colour_only(6, 1)}) {
+    dense.step(p, gz, mask);
+    lazy.step(pl, gl, mask, &rows, msgs::Unlisted::zero_gradient);
+    for (const auto& [a, b] : {std::pair{&p, &pl}, std::pair{&dense.exp_avg, &lazy.exp_avg},
+                               std::pair{&dense.exp_avg_sq, &lazy.exp_avg_sq}}) {
+      CHECK(bits(a->means, b->means));
+      CHECK(bits(a->log_scales, b->log_scales));
+      CHECK(bits(a->quats, b->quats));
+      CHECK(bits(a->opacity_logits, b->opacity_logits));
+      CHECK(bits(a->sh, b->sh));
+    }
+  }
+  // An empty list: every row takes the zero-gradient update.
+  const std::vector<std::uint32_t> none;
+  Model zeros(n);
+  dense.step(p, zeros);
+  lazy.step(pl, gl, {}, &none, msgs::Unlisted::zero_gradient);
+  CHECK(bits(p.means, pl.means));
+  CHECK(bits(p.sh, pl.sh));
 }

@@ -62,6 +62,12 @@ struct AdamMask {
   }
 };
 
+/// What Adam::step does with the rows a row list leaves out.
+enum class Unlisted {
+  untouched,      ///< sparse Adam: parameters and moments stay as they are
+  zero_gradient,  ///< dense Adam: they take the update of a zero gradient (moments decay, parameters coast)
+};
+
 /// Adam over the parameters of a `GaussianModel<G, S>`.
 ///
 /// The moments are two models of the same layout as the parameters (`exp_avg`, `exp_avg_sq`), so
@@ -119,9 +125,13 @@ class Adam {
   /// indices updates those rows only and reads `grad` only there (sparse or "selective" Adam, as
   /// Taming 3DGS and gsplat's sparse gradients: unseen Gaussians and their moments stay exactly as
   /// they are); the trainer passes the Gaussians the view saw, so the step costs what they cost.
+  /// With `unlisted` = Unlisted::zero_gradient the other rows take the update of a zero gradient
+  /// without `grad` being read there: dense Adam, bit for bit, over a gradient buffer whose rows
+  /// outside `rows` were never written (GradientFill::visible), so neither the zeroing pass nor
+  /// Adam's reads of those zeros cost anything.
   /// The step counters advance per group either way.
   void step(GaussianModel<G, S>& params, const GaussianModel<G, S>& grad, const AdamMask& mask = {},
-            const std::vector<std::uint32_t>* rows = nullptr) {
+            const std::vector<std::uint32_t>* rows = nullptr, Unlisted unlisted = Unlisted::untouched) {
     check_sizes(params, grad);
     int first = mask.sh_first, count = mask.sh_count < 0 ? G::bands - mask.sh_first : mask.sh_count;
     if (mask.sh && (first < 0 || count < 0 || first + count > G::bands))
@@ -134,16 +144,18 @@ class Adam {
           throw std::invalid_argument("Adam::step: rows must be ascending indices below " + std::to_string(params.size()));
     const std::int64_t t = iteration++;
     if (mask.means)
-      update_group<3>(params.means, grad.means, exp_avg.means, exp_avg_sq.means, lr_means_at(t), ++steps.means, rows);
+      update_group<3>(params.means, grad.means, exp_avg.means, exp_avg_sq.means, lr_means_at(t), ++steps.means, rows,
+                      unlisted);
     if (mask.scales)
       update_group<3>(params.log_scales, grad.log_scales, exp_avg.log_scales, exp_avg_sq.log_scales, config.lr_scales,
-                      ++steps.scales, rows);
+                      ++steps.scales, rows, unlisted);
     if (mask.quats)
-      update_group<4>(params.quats, grad.quats, exp_avg.quats, exp_avg_sq.quats, config.lr_quats, ++steps.quats, rows);
+      update_group<4>(params.quats, grad.quats, exp_avg.quats, exp_avg_sq.quats, config.lr_quats, ++steps.quats, rows,
+                      unlisted);
     if (mask.opacities)
       update_group<1>(params.opacity_logits, grad.opacity_logits, exp_avg.opacity_logits, exp_avg_sq.opacity_logits,
-                      config.lr_opacities, ++steps.opacities, rows);
-    if (mask.sh && count > 0) update_sh(params, grad, first, count, rows);
+                      config.lr_opacities, ++steps.opacities, rows, unlisted);
+    if (mask.sh && count > 0) update_sh(params, grad, first, count, rows, unlisted);
   }
 
  private:
@@ -181,6 +193,20 @@ class Adam {
     }
   }
 
+  /// update_run for a zero gradient, `g` not read: the same expressions with g = 0, so the same
+  /// bits as update_run over zeros.
+  static void update_run_zero(S* __restrict p, S* __restrict m, S* __restrict v, std::size_t n, const Betas b,
+                              const Coeffs k) {
+    const S g = S(0);
+    for (std::size_t a = 0; a < n; ++a) {
+      const S ma = m[a] + b.b1c * (g - m[a]);
+      const S va = b.b2 * v[a] + b.b2c * g * g;
+      m[a] = ma;
+      v[a] = va;
+      p[a] -= k.step_size * ma / (std::sqrt(va) * k.inv_bc2_sqrt + b.eps);
+    }
+  }
+
   /// The same over `rows` consecutive rows of K values with per-coefficient step sizes (the SH
   /// DC coefficient has its own learning rate); the fixed inner length vectorises.
   template <int K>
@@ -196,26 +222,66 @@ class Adam {
       }
   }
 
-  /// Call f(first_row, row_count) for runs of consecutive rows: every row [0, n), or the listed
-  /// ones (ascending), in parallel over fixed chunks of the list (consecutive visible Gaussians
-  /// then form long runs, which vectorise like the dense update).
+  /// update_rows for a zero gradient, `g` not read (the same bits as update_rows over zeros).
+  template <int K>
+  static void update_rows_zero(S* __restrict p, S* __restrict m, S* __restrict v, std::size_t rows, const Betas b,
+                               const S* __restrict step_size, const S* __restrict inv_bc2_sqrt) {
+    const S g = S(0);
+    for (std::size_t r = 0; r < rows; ++r, p += K, m += K, v += K)
+      for (int a = 0; a < K; ++a) {
+        const S ma = m[a] + b.b1c * (g - m[a]);
+        const S va = b.b2 * v[a] + b.b2c * g * g;
+        m[a] = ma;
+        v[a] = va;
+        p[a] -= step_size[a] * ma / (std::sqrt(va) * inv_bc2_sqrt[a] + b.eps);
+      }
+  }
+
+  /// Call f(first_row, row_count, listed) for runs of consecutive rows: every row [0, n) as
+  /// listed, or the listed ones (ascending), in parallel over fixed chunks of the list
+  /// (consecutive visible Gaussians then form long runs, which vectorise like the dense update);
+  /// with Unlisted::zero_gradient also the runs between them, as not listed, in parallel over
+  /// fixed chunks of rows.
   template <class F>
-  static void for_each_run(std::size_t n, const std::vector<std::uint32_t>* rows, F&& f) {
+  static void for_each_run(std::size_t n, const std::vector<std::uint32_t>* rows, Unlisted unlisted, F&& f) {
     constexpr std::ptrdiff_t kChunk = 2048;
+    if (rows && unlisted == Unlisted::zero_gradient) {
+      const std::ptrdiff_t chunks = (static_cast<std::ptrdiff_t>(n) + kChunk - 1) / kChunk;
+#pragma omp parallel for schedule(static)
+      for (std::ptrdiff_t c = 0; c < chunks; ++c) {
+        const std::size_t r0 = std::size_t(c * kChunk), r1 = std::min(n, std::size_t((c + 1) * kChunk));
+        auto it = std::lower_bound(rows->begin(), rows->end(), std::uint32_t(r0));
+        std::size_t r = r0;
+        while (r < r1) {
+          if (it != rows->end() && *it == r) {  // a run of listed rows
+            std::size_t e = r + 1;
+            ++it;
+            while (e < r1 && it != rows->end() && *it == e) ++e, ++it;
+            f(r, e - r, true);
+            r = e;
+          } else {  // up to the next listed row or the chunk's end
+            const std::size_t e = it != rows->end() ? std::min<std::size_t>(*it, r1) : r1;
+            f(r, e - r, false);
+            r = e;
+          }
+        }
+      }
+      return;
+    }
     const std::ptrdiff_t total = static_cast<std::ptrdiff_t>(rows ? rows->size() : n);
     const std::ptrdiff_t chunks = (total + kChunk - 1) / kChunk;
 #pragma omp parallel for schedule(static)
     for (std::ptrdiff_t c = 0; c < chunks; ++c) {
       const std::ptrdiff_t j1 = std::min(total, (c + 1) * kChunk);
       if (!rows) {
-        f(std::size_t(c * kChunk), std::size_t(j1 - c * kChunk));
+        f(std::size_t(c * kChunk), std::size_t(j1 - c * kChunk), true);
         continue;
       }
       const std::uint32_t* r = rows->data();
       for (std::ptrdiff_t j = c * kChunk; j < j1;) {
         std::ptrdiff_t e = j + 1;
         while (e < j1 && r[e] == r[e - 1] + 1) ++e;
-        f(std::size_t(r[j]), std::size_t(e - j));
+        f(std::size_t(r[j]), std::size_t(e - j), true);
         j = e;
       }
     }
@@ -224,23 +290,24 @@ class Adam {
   /// Update `W` consecutive values per row: every row, or the listed ones.
   template <int W>
   void update_group(std::vector<S>& p, const std::vector<S>& g, std::vector<S>& m, std::vector<S>& v, double lr,
-                    std::int64_t t, const std::vector<std::uint32_t>* rows) const {
+                    std::int64_t t, const std::vector<std::uint32_t>* rows, Unlisted unlisted) const {
     const Coeffs k = coeffs(lr, t);
     const Betas b = betas();
     S* pp = p.data();
     S* mp = m.data();
     S* vp = v.data();
     const S* gp = g.data();
-    for_each_run(p.size() / W, rows, [&](std::size_t row, std::size_t count) {
+    for_each_run(p.size() / W, rows, unlisted, [&](std::size_t row, std::size_t count, bool listed) {
       const std::size_t o = row * W;
-      update_run(pp + o, mp + o, vp + o, gp + o, count * W, b, k);
+      if (listed) update_run(pp + o, mp + o, vp + o, gp + o, count * W, b, k);
+      else update_run_zero(pp + o, mp + o, vp + o, count * W, b, k);
     });
   }
 
   /// SH of channels [first, first + count): one band plane at a time, the DC coefficient with its
   /// own learning rate.
   void update_sh(GaussianModel<G, S>& params, const GaussianModel<G, S>& grad, int first, int count,
-                 const std::vector<std::uint32_t>* rows) {
+                 const std::vector<std::uint32_t>* rows, Unlisted unlisted) {
     constexpr int K = G::sh_coeffs;
     const Betas b = betas();
     const std::size_t stride = params.sh_plane_stride();
@@ -257,9 +324,10 @@ class Adam {
       const S* g = grad.sh.data() + off;
       S* m = exp_avg.sh.data() + off;
       S* v = exp_avg_sq.sh.data() + off;
-      for_each_run(params.size(), rows, [&](std::size_t row, std::size_t n) {
+      for_each_run(params.size(), rows, unlisted, [&](std::size_t row, std::size_t n, bool listed) {
         const std::size_t o = row * K;
-        update_rows<K>(p + o, m + o, v + o, g + o, n, b, step_size.data(), inv.data());
+        if (listed) update_rows<K>(p + o, m + o, v + o, g + o, n, b, step_size.data(), inv.data());
+        else update_rows_zero<K>(p + o, m + o, v + o, n, b, step_size.data(), inv.data());
       });
     }
   }

@@ -446,11 +446,16 @@ class Trainer {
       // only, taken here since nothing else reads them), then the rasteriser.
       if (opt_.exposure) exposure_.backward_and_step(frame, render, d_image);
       if (opt_.clamp_render) clamp01_backward(raw, d_image);
+      // Gradient rows the view did not see: sparse Adam never reads them; dense Adam takes them as
+      // zero without reading them (Unlisted::zero_gradient), except at a step of the scale
+      // regulariser, which gives every Gaussian a gradient: then they are written, zeros included.
       const std::vector<std::uint32_t>& seen = raster.visible();
-      const std::vector<std::uint32_t>* rows = opt_.sparse ? &seen : nullptr;
-      raster.backward(d_image, nullptr, nullptr, grads, opt_.sparse ? GradientFill::visible : GradientFill::dense);
+      const bool reg_step = opt_.scale_reg_every > 0 && step % opt_.scale_reg_every == 0;
+      const bool seen_only = opt_.sparse || !reg_step;
+      const std::vector<std::uint32_t>* rows = seen_only ? &seen : nullptr;
+      raster.backward(d_image, nullptr, nullptr, grads, seen_only ? GradientFill::visible : GradientFill::dense);
       if (opt_.check_finite) check_finite_gradients(step, grads, rows);
-      if (opt_.scale_reg_every > 0 && step % opt_.scale_reg_every == 0)
+      if (reg_step)
         scale_reg<float>(std::span<const float>(model_.log_scales), std::span<float>(grads.model.log_scales),
                          opt_.scale_reg, rows);
       auto t4 = clock::now();
@@ -469,7 +474,7 @@ class Trainer {
       ctx.spectral = band.spectral;
       ctx.mask = AdamMask::band(band.first_channel, band.channels);
       hooks_.pre_backward(plan_, ctx);
-      adam_.step(model_, grads.model, ctx.mask, rows);
+      adam_.step(model_, grads.model, ctx.mask, rows, opt_.sparse ? Unlisted::untouched : Unlisted::zero_gradient);
       auto t5 = clock::now();
       times_.adam += seconds(t4, t5);
 
