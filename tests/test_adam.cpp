@@ -41,6 +41,35 @@ double textbook(double p, const std::vector<double>& grads, const std::vector<do
   return p;
 }
 
+/// Sets every value of the rows of `g` that `listed` leaves out to `v` (poison for a step that must
+/// not read them, or the zeros a dense step reads there).
+void set_unlisted(Model& g, const std::vector<bool>& listed, float v) {
+  for (std::size_t i = 0; i < g.size(); ++i) {
+    if (listed[i]) continue;
+    for (int a = 0; a < 3; ++a) g.means[3 * i + std::size_t(a)] = g.log_scales[3 * i + std::size_t(a)] = v;
+    for (int a = 0; a < 4; ++a) g.quats[4 * i + std::size_t(a)] = v;
+    g.opacity_logits[i] = v;
+    for (int c = 0; c < G7::bands; ++c)
+      for (int k = 0; k < G7::sh_coeffs; ++k) g.sh_at(i, k, c) = v;
+  }
+}
+
+/// A model of `n` random Gaussians after one dense Adam step on a random gradient (moments warm
+/// everywhere), twice (`p`, `dense`: the reference; `q`, `other`: the variant under test), and a
+/// fresh random gradient `g` for the next step.
+struct WarmStart {
+  Model p, g, q;
+  msgs::Adam<G7> dense, other;
+  WarmStart(std::size_t n, std::uint32_t seed) : p(n), g(n), dense({}, n) {
+    fill_random(p, seed, -1.0f, 1.0f);
+    fill_random(g, seed + 1, -1.0f, 1.0f);
+    dense.step(p, g);
+    fill_random(g, seed + 2, -1.0f, 1.0f);
+    q = p;
+    other = dense;
+  }
+};
+
 }  // namespace
 
 TEST_CASE("position learning rate decays exponentially from lr0 to lr1 over T steps") {
@@ -209,27 +238,15 @@ TEST_CASE("size mismatches and bad SH ranges throw") {
 
 TEST_CASE("sparse Adam: listed rows update as dense Adam does, other rows and their moments stay, their gradients are never read") {
   const std::size_t n = 11;
-  Model p(n), g(n);
-  fill_random(p, 21, -1.0f, 1.0f);
-  msgs::Adam<G7> dense({}, n);
-  fill_random(g, 22, -1.0f, 1.0f);
-  dense.step(p, g);  // warm moments everywhere
-  msgs::Adam<G7> sparse = dense;
-  Model ps = p;
-  fill_random(g, 23, -1.0f, 1.0f);
+  WarmStart w(n, 21);
+  auto& [p, g, ps, dense, sparse] = w;
   const std::vector<std::uint32_t> rows = {0, 3, 4, 10};
   auto listed = [&](std::size_t i) { return std::find(rows.begin(), rows.end(), i) != rows.end(); };
+  std::vector<bool> is_listed(n);
+  for (std::size_t i = 0; i < n; ++i) is_listed[i] = listed(i);
   // Poison the gradient rows a sparse step must not read.
   Model gs = g;
-  const float nan = std::numeric_limits<float>::quiet_NaN();
-  for (std::size_t i = 0; i < n; ++i) {
-    if (listed(i)) continue;
-    for (int a = 0; a < 3; ++a) gs.means[3 * i + std::size_t(a)] = gs.log_scales[3 * i + std::size_t(a)] = nan;
-    for (int a = 0; a < 4; ++a) gs.quats[4 * i + std::size_t(a)] = nan;
-    gs.opacity_logits[i] = nan;
-    for (int c = 0; c < 7; ++c)
-      for (int k = 0; k < G7::sh_coeffs; ++k) gs.sh_at(i, k, c) = nan;
-  }
+  set_unlisted(gs, is_listed, std::numeric_limits<float>::quiet_NaN());
   const Model p_before = ps;
   const msgs::AdamMask mask = msgs::AdamMask::band(2, 3);
   dense.step(p, g, mask);
@@ -267,13 +284,8 @@ TEST_CASE("Unlisted::zero_gradient: dense Adam bit for bit, without reading the 
   // More rows than one parallel chunk (2048), listed rows in runs of every length, across chunk
   // boundaries, at both ends.
   const std::size_t n = 5000;
-  Model p(n), g(n);
-  fill_random(p, 31, -1.0f, 1.0f);
-  msgs::Adam<G7> dense({}, n);
-  fill_random(g, 32, -1.0f, 1.0f);
-  dense.step(p, g);  // warm moments everywhere
-  msgs::Adam<G7> lazy = dense;
-  Model pl = p;
+  WarmStart w(n, 31);
+  auto& [p, g, pl, dense, lazy] = w;
   std::vector<std::uint32_t> rows;
   std::mt19937 rng(33);
   for (std::uint32_t i = 0; i < n;) {
@@ -287,27 +299,9 @@ TEST_CASE("Unlisted::zero_gradient: dense Adam bit for bit, without reading the 
   for (std::uint32_t r : rows) listed[r] = true;
   REQUIRE(rows.size() > n / 3);
   REQUIRE(rows.size() < n);
-  fill_random(g, 34, -1.0f, 1.0f);
   Model gz = g, gl = g;  // dense: zeros where not listed; lazy: NaN there, which it must not read
-  const float nan = std::numeric_limits<float>::quiet_NaN();
-  for (std::size_t i = 0; i < n; ++i) {
-    if (listed[i]) continue;
-    for (int a = 0; a < 3; ++a) {
-      gz.means[3 * i + std::size_t(a)] = gz.log_scales[3 * i + std::size_t(a)] = 0.0f;
-      gl.means[3 * i + std::size_t(a)] = gl.log_scales[3 * i + std::size_t(a)] = nan;
-    }
-    for (int a = 0; a < 4; ++a) {
-      gz.quats[4 * i + std::size_t(a)] = 0.0f;
-      gl.quats[4 * i + std::size_t(a)] = nan;
-    }
-    gz.opacity_logits[i] = 0.0f;
-    gl.opacity_logits[i] = nan;
-    for (int c = 0; c < 7; ++c)
-      for (int k = 0; k < G7::sh_coeffs; ++k) {
-        gz.sh_at(i, k, c) = 0.0f;
-        gl.sh_at(i, k, c) = nan;
-      }
-  }
+  set_unlisted(gz, listed, 0.0f);
+  set_unlisted(gl, listed, std::numeric_limits<float>::quiet_NaN());
   const auto bits = [](const std::vector<float>& a, const std::vector<float>& b) {
     return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0;
   };
