@@ -181,26 +181,16 @@ class Adam {
 
   /// The torch.optim.Adam element update (lerp form of the first moment) over `n` consecutive
   /// values. Restrict pointers let the compiler vectorise it (given -fno-math-errno for the square
-  /// root); every value is independent, so vector and scalar code give the same bits.
+  /// root); every value is independent, so vector and scalar code give the same bits. With
+  /// `ZeroGrad` the gradient is 0 and `g` is not read: the same expressions, so the same bits as
+  /// over a buffer of zeros.
+  template <bool ZeroGrad = false>
   static void update_run(S* __restrict p, S* __restrict m, S* __restrict v, const S* __restrict g, std::size_t n,
                          const Betas b, const Coeffs k) {
     for (std::size_t a = 0; a < n; ++a) {
-      const S ma = m[a] + b.b1c * (g[a] - m[a]);
-      const S va = b.b2 * v[a] + b.b2c * g[a] * g[a];
-      m[a] = ma;
-      v[a] = va;
-      p[a] -= k.step_size * ma / (std::sqrt(va) * k.inv_bc2_sqrt + b.eps);
-    }
-  }
-
-  /// update_run for a zero gradient, `g` not read: the same expressions with g = 0, so the same
-  /// bits as update_run over zeros.
-  static void update_run_zero(S* __restrict p, S* __restrict m, S* __restrict v, std::size_t n, const Betas b,
-                              const Coeffs k) {
-    const S g = S(0);
-    for (std::size_t a = 0; a < n; ++a) {
-      const S ma = m[a] + b.b1c * (g - m[a]);
-      const S va = b.b2 * v[a] + b.b2c * g * g;
+      const S ga = ZeroGrad ? S(0) : g[a];
+      const S ma = m[a] + b.b1c * (ga - m[a]);
+      const S va = b.b2 * v[a] + b.b2c * ga * ga;
       m[a] = ma;
       v[a] = va;
       p[a] -= k.step_size * ma / (std::sqrt(va) * k.inv_bc2_sqrt + b.eps);
@@ -209,32 +199,20 @@ class Adam {
 
   /// The same over `rows` consecutive rows of K values with per-coefficient step sizes (the SH
   /// DC coefficient has its own learning rate); the fixed inner length vectorises.
-  template <int K>
+  template <int K, bool ZeroGrad = false>
   static void update_rows(S* __restrict p, S* __restrict m, S* __restrict v, const S* __restrict g, std::size_t rows,
                           const Betas b, const S* __restrict step_size, const S* __restrict inv_bc2_sqrt) {
-    for (std::size_t r = 0; r < rows; ++r, p += K, m += K, v += K, g += K)
+    for (std::size_t r = 0; r < rows; ++r, p += K, m += K, v += K) {
       for (int a = 0; a < K; ++a) {
-        const S ma = m[a] + b.b1c * (g[a] - m[a]);
-        const S va = b.b2 * v[a] + b.b2c * g[a] * g[a];
+        const S ga = ZeroGrad ? S(0) : g[a];
+        const S ma = m[a] + b.b1c * (ga - m[a]);
+        const S va = b.b2 * v[a] + b.b2c * ga * ga;
         m[a] = ma;
         v[a] = va;
         p[a] -= step_size[a] * ma / (std::sqrt(va) * inv_bc2_sqrt[a] + b.eps);
       }
-  }
-
-  /// update_rows for a zero gradient, `g` not read (the same bits as update_rows over zeros).
-  template <int K>
-  static void update_rows_zero(S* __restrict p, S* __restrict m, S* __restrict v, std::size_t rows, const Betas b,
-                               const S* __restrict step_size, const S* __restrict inv_bc2_sqrt) {
-    const S g = S(0);
-    for (std::size_t r = 0; r < rows; ++r, p += K, m += K, v += K)
-      for (int a = 0; a < K; ++a) {
-        const S ma = m[a] + b.b1c * (g - m[a]);
-        const S va = b.b2 * v[a] + b.b2c * g * g;
-        m[a] = ma;
-        v[a] = va;
-        p[a] -= step_size[a] * ma / (std::sqrt(va) * inv_bc2_sqrt[a] + b.eps);
-      }
+      if constexpr (!ZeroGrad) g += K;
+    }
   }
 
   /// Call f(first_row, row_count, listed) for runs of consecutive rows: every row [0, n) as
@@ -300,7 +278,7 @@ class Adam {
     for_each_run(p.size() / W, rows, unlisted, [&](std::size_t row, std::size_t count, bool listed) {
       const std::size_t o = row * W;
       if (listed) update_run(pp + o, mp + o, vp + o, gp + o, count * W, b, k);
-      else update_run_zero(pp + o, mp + o, vp + o, count * W, b, k);
+      else update_run<true>(pp + o, mp + o, vp + o, nullptr, count * W, b, k);
     });
   }
 
@@ -327,7 +305,7 @@ class Adam {
       for_each_run(params.size(), rows, unlisted, [&](std::size_t row, std::size_t n, bool listed) {
         const std::size_t o = row * K;
         if (listed) update_rows<K>(p + o, m + o, v + o, g + o, n, b, step_size.data(), inv.data());
-        else update_rows_zero<K>(p + o, m + o, v + o, n, b, step_size.data(), inv.data());
+        else update_rows<K, true>(p + o, m + o, v + o, nullptr, n, b, step_size.data(), inv.data());
       });
     }
   }

@@ -172,7 +172,7 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
   Binning::Scratch& sc = out.scratch;
 
   // 1. Front-to-back order of the visible Gaussians. Sorted are positions v into visible_ids
-  //    (increasing ids, so ties stay ordered by id).
+  //    (increasing ids, so ties stay ordered by id unless tie_key orders them below).
   //    The keys, and the pair count of every Gaussian (its tile-rectangle area, for step 2), are
   //    filled in one parallel pass.
   sc.keys.resize(V);
