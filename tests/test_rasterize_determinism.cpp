@@ -286,3 +286,37 @@ TEST_CASE("RasterOptions::ties_by_mean: Gaussians at exactly one depth blend in 
   // gsplat's order (ties by row) does depend on the rows: the test can tell.
   CHECK_FALSE(same_render_reversed<RasterOptions{}>(m, cam));
 }
+
+TEST_CASE("ties_by_mean and the visible list over many chunks: runs of equal depth across chunk boundaries") {
+  // Enough visible Gaussians for the projection's visible-list collection and binning's tie runs
+  // to be split into several fixed chunks (one per 4096), with runs of seven Gaussians at exactly
+  // the same depth: most chunk boundaries of the depth order fall inside a run.
+  Camera<float> cam = kSmallCam;
+  cam.R.setIdentity();
+  cam.t.setZero();
+  GaussianModel<G, float> m = small_scene(35000, 82);
+  for (std::size_t i = 0; i + 7 <= m.size(); i += 7)
+    for (std::size_t j = 1; j < 7; ++j) {
+      m.means[3 * (i + j)] = m.means[3 * i] + 0.004f * float(j);
+      m.means[3 * (i + j) + 1] = m.means[3 * i + 1] - 0.003f * float(j);
+      m.means[3 * (i + j) + 2] = m.means[3 * i + 2];
+    }
+  constexpr RasterOptions kOpt{.absgrad = true, .single_precision = true, .ties_by_mean = true};
+  const int saved = omp_get_max_threads();
+  Rasterizer<G, float, kOpt> one, two;
+  omp_set_num_threads(1);
+  one.forward(m, cam);
+  omp_set_num_threads(2);
+  two.forward(m, cam);
+  omp_set_num_threads(saved);
+  REQUIRE(one.visible_count() > 3 * 4096);
+  // The visible list: every Gaussian with a footprint, ascending, whatever the thread count.
+  std::vector<std::uint32_t> want;
+  for (std::size_t i = 0; i < m.size(); ++i)
+    if (one.radii()[2 * i] > 0 || one.radii()[2 * i + 1] > 0) want.push_back(std::uint32_t(i));
+  CHECK(one.visible() == want);
+  CHECK(two.visible() == want);
+  CHECK(bitwise_equal(one.image().data, two.image().data));
+  CHECK(one.binning().tile_list == two.binning().tile_list);
+  CHECK(same_render_reversed<kOpt>(m, cam));
+}

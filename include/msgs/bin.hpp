@@ -191,17 +191,27 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
   detail::radix_sort_by_key(sc.keys, sc.pos, int(sizeof(S)), sc.keys2, sc.pos2, sc.hist);
   if constexpr (!std::is_same_v<TieKey, TiesById>) {
     // Runs of equal depth keys, ordered by (tie key, id); positions are increasing ids within a run.
-    for (std::size_t i = 0; i + 1 < V;) {
-      std::size_t e = i + 1;
-      while (e < V && sc.keys[e] == sc.keys[i]) ++e;
-      if (e - i > 1) {
-        const auto by_key = [&](std::uint32_t a, std::uint32_t b) {
-          const std::uint64_t ka = tie_key(visible_ids[a]), kb = tie_key(visible_ids[b]);
-          return ka != kb ? ka < kb : a < b;
-        };
-        std::sort(sc.pos.begin() + std::ptrdiff_t(i), sc.pos.begin() + std::ptrdiff_t(e), by_key);
+    // In parallel over fixed chunks: a run belongs to the chunk it starts in, and may end past it.
+    // (Clones share their parent's depth until they move apart, so a frame has many such runs.)
+    const int tchunks = detail::fixed_chunks(V);
+#pragma omp parallel for schedule(static)
+    for (int k = 0; k < tchunks; ++k) {
+      const std::size_t c1 = V * std::size_t(k + 1) / std::size_t(tchunks);
+      std::size_t i = V * std::size_t(k) / std::size_t(tchunks);
+      if (i > 0)
+        while (i < c1 && sc.keys[i] == sc.keys[i - 1]) ++i;  // the rest of an earlier chunk's run
+      while (i < c1) {
+        std::size_t e = i + 1;
+        while (e < V && sc.keys[e] == sc.keys[i]) ++e;
+        if (e - i > 1) {
+          const auto by_key = [&](std::uint32_t a, std::uint32_t b) {
+            const std::uint64_t ka = tie_key(visible_ids[a]), kb = tie_key(visible_ids[b]);
+            return ka != kb ? ka < kb : a < b;
+          };
+          std::sort(sc.pos.begin() + std::ptrdiff_t(i), sc.pos.begin() + std::ptrdiff_t(e), by_key);
+        }
+        i = e;
       }
-      i = e;
     }
   }
   // The order and the tile rectangles in that order, gathered once so that the two passes below

@@ -385,9 +385,25 @@ class Rasterizer {
         for (int l = 0; l < n; ++l)
           if (hard >> l & 1u) project_batch<double>(model, &ids[l], 1);
     }
-    visible_.clear();
-    for (std::int64_t i = 0; i < N; ++i)
-      if (visible_flag_[std::size_t(i)]) visible_.push_back(std::uint32_t(i));
+    // The visible ids, ascending: counted per fixed chunk of rows, then each chunk writes its ids
+    // from its offset (a serial pass here took 8% of the demo's projection time).
+    const int chunks = detail::fixed_chunks(std::size_t(N));
+    const auto chunk_begin = [&](int k) { return std::size_t(N) * std::size_t(k) / std::size_t(chunks); };
+    visible_offset_.assign(std::size_t(chunks) + 1, 0);
+#pragma omp parallel for schedule(static)
+    for (int k = 0; k < chunks; ++k) {
+      std::size_t c = 0;
+      for (std::size_t i = chunk_begin(k), e = chunk_begin(k + 1); i < e; ++i) c += visible_flag_[i];
+      visible_offset_[std::size_t(k) + 1] = c;
+    }
+    for (int k = 0; k < chunks; ++k) visible_offset_[std::size_t(k) + 1] += visible_offset_[std::size_t(k)];
+    visible_.resize(visible_offset_[std::size_t(chunks)]);
+#pragma omp parallel for schedule(static)
+    for (int k = 0; k < chunks; ++k) {
+      std::uint32_t* out = visible_.data() + visible_offset_[std::size_t(k)];
+      for (std::size_t i = chunk_begin(k), e = chunk_begin(k + 1); i < e; ++i)
+        if (visible_flag_[i]) *out++ = std::uint32_t(i);
+    }
   }
 
   /// Project and shade the Gaussians ids[0 .. n) (lanes past n repeat ids[0]) and write their
@@ -602,6 +618,7 @@ class Rasterizer {
   std::vector<std::int32_t> radii_;    // [N, 2]
   std::vector<std::uint8_t> visible_flag_;  // [N]
   std::vector<std::uint32_t> visible_; // [V] ascending
+  std::vector<std::size_t> visible_offset_;  // [chunks + 1] scratch of project_all
   Binning bins_;
 
   // Blend results.
