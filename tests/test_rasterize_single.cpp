@@ -193,18 +193,22 @@ TEST_CASE("single-precision projection hands the hard Gaussians to double precis
   const Camera<double> c = test_camera<double>(320, 240, 150.0, 130.0, 300.0);
   const ProjectCamera cam = ProjectCamera::from(c);
   const double nan = std::numeric_limits<double>::quiet_NaN();
-  // Each case: a tame Gaussian made hard in one way. Lanes alternate hard and tame.
-  std::vector<GaussianGeometry> gs = tame_geometries(11, L);
+  // Each case: a tame Gaussian made hard in one way; even entries are hard, odd ones tame. The
+  // 16 entries (eight hard cases) go through the lanes in batches of L (one batch with AVX-512,
+  // two with AVX2, four with SSE2), so every build meets every case.
+  constexpr int kCases = 16;
+  static_assert(kCases % L == 0);
+  std::vector<GaussianGeometry> gs = tame_geometries(11, kCases);
   auto in_front = [&](double x, double y, double z) {  // camera-space point -> world
     const Eigen::Vector3d p(x, y, z);
     return Eigen::Vector3d(c.R.transpose() * (p - c.t));
   };
-  for (int l = 0; l < L; l += 2) {
-    GaussianGeometry& g = gs[std::size_t(l)];
+  for (int i = 0; i < kCases; i += 2) {
+    GaussianGeometry& g = gs[std::size_t(i)];
     g.mean = in_front(0.1, 0.1, 4.0);
     g.log_scale = Eigen::Vector3d(-3, -3, -3);
     g.opacity_logit = 2;
-    switch ((l / 2) % 8) {
+    switch (i / 2) {
       case 0: g.log_scale[1] = 25.0; break;                     // scale e^25
       case 1: g.log_scale[2] = -21.0; break;                    // scale e^-21
       case 2: g.mean = in_front(0.0, 0.0, 3e7); break;          // beyond kMean
@@ -216,23 +220,25 @@ TEST_CASE("single-precision projection hands the hard Gaussians to double precis
       default: g.opacity_logit = nan; break;
     }
   }
-  detail::GeometryLanes<D> gl;
-  for (int l = 0; l < L; ++l) set_geometry_lane(gl, l, gs[std::size_t(l)]);
-  detail::ProjectedLanes<D> pl;
-  const auto vis = detail::project_lanes<false>(gl, cam, pl, nullptr, false);
-  detail::ProjectedGradLanes<D> vl{};
-  for (int l = 0; l < L; ++l) vl.mean2d[0][l] = 1.0f, vl.conic[0][l] = 1.0f, vl.opacity[l] = 1.0f;
-  detail::GeometryGradLanes<D> gradl{};
-  const auto hard_bwd = detail::project_bwd_lanes<false>(gl, cam, vl, gradl, false);
-  for (int l = 0; l < L; ++l) {
-    INFO("lane ", l);
-    const bool hard = (l % 2 == 0);
-    CHECK((pl.hard[l] != 0) == hard);
-    CHECK((hard_bwd[l] != 0) == hard);
-    if (hard) {
-      CHECK(vis[l] == 0);
-      CHECK(gradl.mean[0][l] == 0.0f);  // untouched: the double-precision pass writes these
-      CHECK(gradl.opacity_logit[l] == 0.0f);
+  for (int i0 = 0; i0 < kCases; i0 += L) {
+    detail::GeometryLanes<D> gl;
+    for (int l = 0; l < L; ++l) set_geometry_lane(gl, l, gs[std::size_t(i0 + l)]);
+    detail::ProjectedLanes<D> pl;
+    const auto vis = detail::project_lanes<false>(gl, cam, pl, nullptr, false);
+    detail::ProjectedGradLanes<D> vl{};
+    for (int l = 0; l < L; ++l) vl.mean2d[0][l] = 1.0f, vl.conic[0][l] = 1.0f, vl.opacity[l] = 1.0f;
+    detail::GeometryGradLanes<D> gradl{};
+    const auto hard_bwd = detail::project_bwd_lanes<false>(gl, cam, vl, gradl, false);
+    for (int l = 0; l < L; ++l) {
+      INFO("case ", i0 + l);
+      const bool hard = ((i0 + l) % 2 == 0);
+      CHECK((pl.hard[l] != 0) == hard);
+      CHECK((hard_bwd[l] != 0) == hard);
+      if (hard) {
+        CHECK(vis[l] == 0);
+        CHECK(gradl.mean[0][l] == 0.0f);  // untouched: the double-precision pass writes these
+        CHECK(gradl.opacity_logit[l] == 0.0f);
+      }
     }
   }
   // The footprint case is on screen in double precision (what it is handed to).

@@ -322,15 +322,18 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
         const int b = by * TBk::kPerSide + bx;
         if (!live[b]) continue;
         detail::FragmentAlpha<S> f[NH];
-        terms.sigma_into(f[0].sigma, bx, by, 0);
-        M near = f[0].sigma <= sigma_cut;
-        for (int h = 1; h < NH; ++h) {
+        std::uint32_t near_bits = 0;  // lanes within the cut whose pixel is still live, per chunk
+        for (int h = 0; h < NH; ++h) {
           terms.sigma_into(f[h].sigma, bx, by, h);
-          near |= f[h].sigma <= sigma_cut;
+          near_bits |= detail::lane_bits((f[h].sigma <= sigma_cut) & (T[b * NH + h] > zero)) << (h * L);
         }
-        if (!detail::any_lane(near)) continue;
+        if (near_bits == 0) continue;
         std::uint32_t took = 0;
         for (int h = 0; h < NH; ++h) {
+          // A block of several vectors (AVX2, SSE) skips each vector without such a lane: none
+          // of its lanes could pass `ok` below, so skipping changes no bit.
+          if constexpr (NH > 1)
+            if (((near_bits >> (h * L)) & ((1u << L) - 1u)) == 0) continue;
           const int q = b * NH + h;
           detail::alpha_from_sigma(f[h], s.o, max_alpha);
           const V alpha = f[h].alpha;
@@ -469,6 +472,8 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
     for (int l = 0; l < NL * NH; ++l) lane[l] = zero;
     const detail::BlockRange range(s.rect, tb);
     const detail::SplatBlockTerms<S> terms(s, lx, ly, tb.x0, tb.y0, range);
+    [[maybe_unused]] V sigma_cut;
+    detail::broadcast(sigma_cut, s.sigma_cut);
     // For absgrad: the per-pixel dL/dmean = -u (a dx + b dy, b dx + c dy) in column and row parts.
     [[maybe_unused]] V a_dx[AbsGrad ? P : 1][NH], b_dy[AbsGrad ? P : 1][NH], c_dy[AbsGrad ? P : 1][NH];
     if constexpr (AbsGrad) {
@@ -487,6 +492,10 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
         const int q = b * NH + h;
         detail::FragmentAlpha<S> f;
         terms.sigma_into(f.sigma, bx, by, h);
+        // As in the forward: a vector of a block without a lane inside the cut and in front of
+        // its pixel's last blended splat adds nothing (every lane fails `ok`); skip it.
+        if constexpr (NH > 1)
+          if (!detail::any_lane((f.sigma <= sigma_cut) & __builtin_convertvector(k < last[q], M))) continue;
         detail::alpha_from_sigma(f, s.o, max_alpha);
         const V alpha = f.alpha, falloff = f.falloff;
         const M ok = __builtin_convertvector(k < last[q], M) & (f.sigma >= zero) & (alpha >= min_alpha);

@@ -570,11 +570,21 @@ class Rasterizer {
           }
       }
     }
+    // gather() fills every coefficient below K of every channel below count, all that load() is
+    // asked for; GCC 12 cannot follow that through colour_bwd_lanes for one-coefficient models
+    // with 8 lanes (AVX2) and warns of an uninitialised read.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
     D load(int ch, int k) const {
       D d;
       std::memcpy(&d, v[ch][k], sizeof d);
       return d;
     }
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
     void store(int ch, int k, const D& d) { std::memcpy(v[ch][k], &d, sizeof d); }
     /// Write the first n lanes' K coefficients of each channel into `g`, zeros above K; lanes
     /// whose bit is set in `skip` are left out.
@@ -586,7 +596,7 @@ class Rasterizer {
             D r[L];
             for (int k = 0; k < L; ++k) r[k] = k0 + k < K ? load(ch, k0 + k) : D{};
             detail::transpose_square(r);
-            for (int l = 0; l < n; ++l)
+            for (int l = 0; l < L && l < n; ++l)  // n <= L; the first bound lets GCC see it
               if (!(skip >> l & 1u)) std::memcpy(g.sh_row(ids[l], first + ch) + k0, &r[l], sizeof(D));
           }
       } else {
