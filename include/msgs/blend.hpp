@@ -469,6 +469,9 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
     V z;
     detail::broadcast(z, s.z);
     V lane[NL * NH];  // [accumulator][chunk]
+    // Unrolled, so that GCC does not turn it into a call to memset per intersection (with AVX2
+    // that call and its vzeroupper took 5% of a training step).
+#pragma GCC unroll 64
     for (int l = 0; l < NL * NH; ++l) lane[l] = zero;
     const detail::BlockRange range(s.rect, tb);
     const detail::SplatBlockTerms<S> terms(s, lx, ly, tb.x0, tb.y0, range);
