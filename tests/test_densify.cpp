@@ -5,6 +5,7 @@
 #include <Eigen/Geometry>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <random>
 #include <string>
@@ -758,6 +759,55 @@ TEST_CASE("in-place row application equals a plain out-of-place copy for random 
       detail::apply_rows_impl(plan, got, w, zero_fresh, "test", planes);
       CHECK(got == want);
     }
+  }
+}
+
+TEST_CASE("parallel_move equals memmove for overlapping moves up and down, in waves and serial") {
+  // Shifts below, at and above the wave threshold (2^16 values), moves longer and shorter than
+  // the shift, up and down; the buffer holds distinct values so any misplaced one shows.
+  const std::size_t n = 300000;
+  for (const std::size_t d : {std::size_t(1), std::size_t(100), std::size_t(65536), std::size_t(70001),
+                              std::size_t(150000), std::size_t(400000)})
+    for (const std::size_t len : {std::size_t(1000), std::size_t(200000), n})
+      for (const bool up : {true, false}) {
+        INFO("shift ", d, " length ", len, " up ", up);
+        std::vector<std::uint32_t> want(n + d + 16), got;
+        for (std::size_t k = 0; k < want.size(); ++k) want[k] = std::uint32_t(k * 2654435761u);
+        got = want;
+        const std::size_t src = up ? 3 : 3 + d, dst = up ? 3 + d : 3;
+        std::memmove(want.data() + dst, want.data() + src, len * sizeof(std::uint32_t));
+        detail::parallel_move(got.data() + dst, got.data() + src, len);
+        CHECK(got == want);
+      }
+}
+
+TEST_CASE("in-place row application of a large plan equals the plain copy (parallel restride of the planes)") {
+  // Large enough for the restride moves of the planes to run in parallel waves.
+  std::mt19937 rng(5);
+  for (const bool grow : {true, false}) {
+    const std::size_t n = 60000, planes = 3, w = 16;
+    RefinePlan plan;
+    plan.input_size = n;
+    for (std::size_t i = 0; i < n; ++i)
+      if (rng() % 10 != 0) {
+        plan.source.push_back(std::uint32_t(i));
+        plan.fresh.push_back(false);
+      }
+    const std::size_t extra = grow ? n / 5 : n / 50;
+    for (std::size_t e = 0; e < extra; ++e) {
+      plan.source.push_back(std::uint32_t(rng() % n));
+      plan.fresh.push_back(rng() % 2 == 0);
+    }
+    std::vector<float> rows(planes * n * w);
+    for (std::size_t k = 0; k < rows.size(); ++k) rows[k] = float(k % 1000003) + 0.25f;
+    std::vector<float> want(planes * plan.size() * w, 0.0f);
+    for (std::size_t q = 0; q < planes; ++q)
+      for (std::size_t i = 0; i < plan.size(); ++i) {
+        if (plan.fresh[i]) continue;
+        for (std::size_t a = 0; a < w; ++a) want[(q * plan.size() + i) * w + a] = rows[(q * n + plan.source[i]) * w + a];
+      }
+    detail::apply_rows_impl(plan, rows, w, true, "test", planes);
+    CHECK(rows == want);
   }
 }
 

@@ -154,6 +154,38 @@ struct RefinePlan {
 };
 
 namespace detail {
+/// memmove(dst, src, n values) spread over the OpenMP threads. Where the two ranges overlap by
+/// more than half, the move runs in waves of the shift d = |dst - src| values, starting at the
+/// end that is written first (the top when moving up): within a wave source and destination are
+/// disjoint, and a wave only overwrites values an earlier wave has already moved. Short moves and
+/// shifts too small to be worth a wave stay one serial memmove. The result is memmove's.
+template <class T>
+void parallel_move(T* dst, const T* src, std::size_t n) {
+  if (dst == src || n == 0) return;
+  constexpr std::size_t kMinWave = std::size_t(1) << 16;  // values per wave worth a fork
+  const std::size_t d = dst > src ? std::size_t(dst - src) : std::size_t(src - dst);
+  const std::size_t wave = std::min(d, n);
+  if (wave < kMinWave) {
+    std::memmove(dst, src, n * sizeof(T));
+    return;
+  }
+  const bool up = dst > src;
+  const std::size_t waves = (n + wave - 1) / wave;
+  constexpr std::size_t kPiece = std::size_t(1) << 14;  // values per task within a wave
+#pragma omp parallel
+  for (std::size_t k = 0; k < waves; ++k) {
+    // Wave k: values [lo, hi) of the source (from the top when moving up, from the bottom down).
+    const std::size_t lo = up ? (n > (k + 1) * wave ? n - (k + 1) * wave : 0) : k * wave;
+    const std::size_t hi = up ? n - k * wave : std::min(n, (k + 1) * wave);
+    const std::ptrdiff_t pieces = std::ptrdiff_t((hi - lo + kPiece - 1) / kPiece);
+#pragma omp for schedule(static)
+    for (std::ptrdiff_t p = 0; p < pieces; ++p) {
+      const std::size_t a = lo + std::size_t(p) * kPiece, b = std::min(hi, a + kPiece);
+      std::memcpy(dst + a, src + a, (b - a) * sizeof(T));
+    }
+  }
+}
+
 /// Apply `plan` to `rows`, `planes` consecutive planes of plan.input_size rows of `width` values
 /// each (one plane for most arrays, the band planes for SH), in place: no new array of the model's
 /// size, so a refinement costs the rows that move, not an allocation (and its page faults) per
@@ -198,7 +230,7 @@ void apply_rows_impl(const RefinePlan& plan, std::vector<T>& rows, std::size_t w
         if (s == RefinePlan::none || (zero_fresh && plan.fresh[f])) std::fill_n(plane.data() + f * w, w, T(0));
         else std::copy_n(from + std::size_t(s) * w, w, plane.data() + f * w);
       }
-      std::copy_n(plane.data(), m * w, rows.data() + q * m * w);
+      parallel_move(rows.data() + q * m * w, plane.data(), m * w);
     }
     rows.resize(planes * m * w);
     return;
@@ -230,11 +262,9 @@ void apply_rows_impl(const RefinePlan& plan, std::vector<T>& rows, std::size_t w
   if (planes * m * w > rows.capacity()) rows.reserve(planes * m * w + planes * m * w / 4);  // room for later growth
   if (m > n) {
     rows.resize(planes * m * w);
-    for (std::size_t q = planes; q-- > 1;)
-      std::memmove(rows.data() + q * m * w, rows.data() + q * n * w, kept * w * sizeof(T));
+    for (std::size_t q = planes; q-- > 1;) parallel_move(rows.data() + q * m * w, rows.data() + q * n * w, kept * w);
   } else {
-    for (std::size_t q = 1; q < planes; ++q)
-      std::memmove(rows.data() + q * m * w, rows.data() + q * n * w, kept * w * sizeof(T));
+    for (std::size_t q = 1; q < planes; ++q) parallel_move(rows.data() + q * m * w, rows.data() + q * n * w, kept * w);
     rows.resize(planes * m * w);
   }
   for (std::size_t q = 0; q < planes; ++q)
