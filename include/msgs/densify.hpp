@@ -154,8 +154,8 @@ struct RefinePlan {
 };
 
 namespace detail {
-/// memmove(dst, src, n values) spread over the OpenMP threads. Where the two ranges overlap by
-/// more than half, the move runs in waves of the shift d = |dst - src| values, starting at the
+/// memmove(dst, src, n values) spread over the OpenMP threads. Where the two ranges overlap
+/// (shift d = |dst - src| < n), the move runs in waves of d values, starting at the
 /// end that is written first (the top when moving up): within a wave source and destination are
 /// disjoint, and a wave only overwrites values an earlier wave has already moved. Short moves and
 /// shifts too small to be worth a wave stay one serial memmove. The result is memmove's.
