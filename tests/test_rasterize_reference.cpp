@@ -320,3 +320,30 @@ TEST_CASE("projection exp and log (lexp, llog): within 1 ulp of libm, the same b
   CHECK(detail::llog(1.0) == 0.0);
   for (double bad : {0.0, -1.0, 1e-310, inf, -inf, nan}) CHECK(std::isnan(detail::llog(bad)));
 }
+
+TEST_CASE("pixel_rect: every pixel centre within the extent, clipped to the image; NaN gives nothing") {
+  constexpr int W = 64, H = 48;
+  std::mt19937_64 rng(17);
+  std::uniform_real_distribution<double> um(-20.0, 84.0), ue(0.0, 30.0);
+  for (int i = 0; i < 2000; ++i) {
+    const double mx = um(rng), my = um(rng), ex = ue(rng), ey = ue(rng);
+    const PixelRect r = pixel_rect(mx, my, ex, ey, W, H);
+    INFO("mean ", mx, " ", my, " extent ", ex, " ", ey);
+    for (int x = 0; x < W; ++x)
+      for (int y = 0; y < H; ++y)
+        if (std::abs(x + 0.5 - mx) <= ex && std::abs(y + 0.5 - my) <= ey) {
+          REQUIRE(!r.empty());
+          CHECK((r.x0 <= x && x <= r.x1 && r.y0 <= y && y <= r.y1));
+        }
+    if (!r.empty()) CHECK((r.x0 >= 0 && r.x1 < W && r.y0 >= 0 && r.y1 < H));
+  }
+  const double nan = std::numeric_limits<double>::quiet_NaN(), inf = std::numeric_limits<double>::infinity();
+  CHECK(pixel_rect(nan, 10, 2, 2, W, H).empty());
+  CHECK(pixel_rect(10, nan, 2, 2, W, H).empty());
+  CHECK(pixel_rect(10, 10, nan, 2, W, H).empty());
+  CHECK(pixel_rect(10, 10, 2, nan, W, H).empty());
+  CHECK(pixel_rect(inf, 10, 2, 2, W, H).empty());  // inf - inf would be NaN: the whole image
+  CHECK(pixel_rect(10, -inf, 2, 2, W, H).empty());
+  const PixelRect all = pixel_rect(10, 10, inf, inf, W, H);  // an infinite extent covers the image
+  CHECK((all.x0 == 0 && all.y0 == 0 && all.x1 == W - 1 && all.y1 == H - 1));
+}

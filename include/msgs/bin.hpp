@@ -34,8 +34,11 @@ struct PixelRect {
 
 /// Pixel rectangle whose centres (i + 0.5, j + 0.5) may lie within `extent` of `mean`. A small
 /// relative margin absorbs the difference between the double-precision extent and the
-/// single-precision alpha test, so no pixel that passes alpha >= 1/255 is ever left out.
+/// single-precision alpha test, so no pixel that passes alpha >= 1/255 is ever left out. A mean
+/// that is not finite, or a NaN extent, gives the empty rectangle (std::max and std::min below
+/// would turn the NaN bounds they lead to into the image's edges: the whole image).
 inline PixelRect pixel_rect(double mx, double my, double ex, double ey, int width, int height) {
+  if (!std::isfinite(mx) || !std::isfinite(my) || std::isnan(ex) || std::isnan(ey)) return PixelRect{};
   ex = ex * (1.0 + 1e-4) + 1e-6 * std::abs(mx) + 1e-2;
   ey = ey * (1.0 + 1e-4) + 1e-6 * std::abs(my) + 1e-2;
   // Clip in double before converting, so huge extents never overflow an int.
@@ -44,7 +47,7 @@ inline PixelRect pixel_rect(double mx, double my, double ex, double ey, int widt
   const double y0 = std::max(0.0, std::ceil(my - ey - 0.5));
   const double y1 = std::min(double(height - 1), std::floor(my + ey - 0.5));
   PixelRect r;
-  if (!(x0 <= x1) || !(y0 <= y1)) return r;  // also catches NaN
+  if (!(x0 <= x1) || !(y0 <= y1)) return r;
   r.x0 = std::int32_t(x0); r.x1 = std::int32_t(x1);
   r.y0 = std::int32_t(y0); r.y1 = std::int32_t(y1);
   return r;
