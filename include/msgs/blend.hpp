@@ -91,41 +91,44 @@ struct BlockRange {
   }
 };
 
-/// The terms of a splat's Mahalanobis half-distance sigma = 0.5 (a dx^2 + c dy^2) + b dx dy over
-/// the blocks of one tile. Within block column bx, dx depends on the lane only, within block row
-/// by so does dy, so with the per-column terms (0.5 a dx^2, b dx) and per-row terms (0.5 c dy^2,
-/// dy) set up once per splat, sigma costs two vector operations per block. Forward and backward
-/// both evaluate sigma through sigma_into, so their fragment decisions agree bit for bit.
+/// The pixel centres of one tile's blocks: x[bx][h] holds the x of the lanes of chunk h in block
+/// column bx, y[by][h] the y in block row by (exact in S). Set up once per tile.
 template <class S>
-struct SplatBlockTerms {
+struct TileCentres {
   using V = typename BlockVec<S>::V;
   static constexpr int NH = BlockVec<S>::kChunks, P = TileBlocks::kPerSide;
-  V dx[P][NH];          ///< pixel centre x - mean x, per block column and chunk
-  V half_a_dx2[P][NH];  ///< 0.5 a dx^2
-  V b_dx[P][NH];        ///< b dx
-  V dy[P][NH];          ///< pixel centre y - mean y, per block row and chunk
-  V half_c_dy2[P][NH];  ///< 0.5 c dy^2
+  V x[P][NH], y[P][NH];
 
   /// `lx`, `ly`: the pixel-centre offsets (0.5 .. 3.5) of each lane within a block; `x0`, `y0`:
-  /// the tile's corner; only the columns and rows of `r` are set up.
-  SplatBlockTerms(const Splat<S>& s, const V* lx, const V* ly, int x0, int y0, const BlockRange& r) {
+  /// the tile's corner.
+  TileCentres(const V* lx, const V* ly, int x0, int y0) {
     constexpr int B = TileBlocks::kSide;
-    for (int bx = r.bx0; bx <= r.bx1; ++bx)
+    for (int b = 0; b < P; ++b)
       for (int h = 0; h < NH; ++h) {
-        dx[bx][h] = (S(x0 + B * bx) + lx[h]) - s.mx;  // pixel centres are exact in S
-        half_a_dx2[bx][h] = (S(0.5) * s.a) * dx[bx][h] * dx[bx][h];
-        b_dx[bx][h] = s.b * dx[bx][h];
-      }
-    for (int by = r.by0; by <= r.by1; ++by)
-      for (int h = 0; h < NH; ++h) {
-        dy[by][h] = (S(y0 + B * by) + ly[h]) - s.my;
-        half_c_dy2[by][h] = (S(0.5) * s.c) * dy[by][h] * dy[by][h];
+        x[b][h] = S(x0 + B * b) + lx[h];
+        y[b][h] = S(y0 + B * b) + ly[h];
       }
   }
-  /// out = sigma at chunk h of block (bx, by).
-  void sigma_into(V& out, int bx, int by, int h) const {
-    out = (half_a_dx2[bx][h] + half_c_dy2[by][h]) + b_dx[bx][h] * dy[by][h];
-  }
+};
+
+/// A splat's Mahalanobis half-distance sigma = 0.5 (a dx^2 + c dy^2) + b dx dy over the chunks of
+/// a tile, evaluated where it is needed from the tile's pixel centres: per block row the row part
+/// (dy, 0.5 c dy^2), per chunk the rest. No per-splat tables: filling them (up to 40 vectors
+/// stored per splat and intersection) cost a third of the blend forward. Forward and backward both
+/// evaluate sigma through at(), so their fragment decisions agree bit for bit.
+template <class S>
+struct SplatSigma {
+  using V = typename BlockVec<S>::V;
+  S half_a, half_c, b, mx, my;
+
+  explicit SplatSigma(const Splat<S>& s) : half_a(S(0.5) * s.a), half_c(S(0.5) * s.c), b(s.b), mx(s.mx), my(s.my) {}
+  /// Pixel centre x - mean x at chunk h of block column bx; dy likewise for block row by.
+  V dx(const TileCentres<S>& c, int bx, int h) const { return c.x[bx][h] - mx; }
+  V dy(const TileCentres<S>& c, int by, int h) const { return c.y[by][h] - my; }
+  /// The row part 0.5 c dy^2.
+  V row(const V& dy) const { return half_c * dy * dy; }
+  /// sigma from dx, dy and row(dy).
+  V at(const V& dx, const V& dy, const V& row_part) const { return (half_a * dx * dx + row_part) + (b * dx) * dy; }
 };
 
 /// The pixel-centre offsets within a block of each lane: lx = x % 4 + 0.5, ly = y % 4 + 0.5.
@@ -272,6 +275,7 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
       if constexpr (Depth) detail::prefetch_for_write(out.depth + pix, std::size_t(tb.w));
     }
   }
+  const detail::TileCentres<S> centres(lx, ly, tb.x0, tb.y0);
   // Blocks whose pixels have all stopped are skipped; the check runs every kCheckEvery splats so
   // that the hot loop carries no horizontal reductions.
   constexpr int kCheckEvery = 8;
@@ -309,9 +313,9 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
     detail::broadcast(z, s.z);
     U pos;
     detail::broadcast(pos, std::uint32_t(j - begin + 1));
-    const detail::SplatBlockTerms<S> terms(s, lx, ly, tb.x0, tb.y0, range);
+    const detail::SplatSigma<S> sg(s);
     // Blocks of the bounding box that the alpha >= 1/255 ellipse misses are skipped after sigma
-    // alone (2 vector operations instead of exp, masks and accumulation). The cut is conservative
+    // alone (a few vector operations instead of exp, masks and accumulation). The cut is conservative
     // (set_sigma_cut): the exact path could only reject every lane too, so the fragments taken are
     // exactly those of the full evaluation.
     V sigma_cut;
@@ -325,14 +329,20 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
     V sig[Q];
     std::uint8_t item[Q];
     int n = 0;
-    for (int by = range.by0; by <= range.by1; ++by)
+    for (int by = range.by0; by <= range.by1; ++by) {
+      V dy[NH], row[NH];
+      for (int h = 0; h < NH; ++h) {
+        dy[h] = sg.dy(centres, by, h);
+        row[h] = sg.row(dy[h]);
+      }
       for (int bx = range.bx0; bx <= range.bx1; ++bx)
         for (int h = 0; h < NH; ++h) {
           const int q = (by * TBk::kPerSide + bx) * NH + h;
-          terms.sigma_into(sig[n], bx, by, h);
+          sig[n] = sg.at(sg.dx(centres, bx, h), dy[h], row[h]);
           item[n] = std::uint8_t(q);
           n += int(detail::any_lane((sig[n] <= sigma_cut) & (T[q] > zero)));
         }
+    }
     // Pass 2: blend the listed chunks.
     std::uint32_t blocks_blended = 0;
     for (int i = 0; i < n; ++i) {
@@ -407,6 +417,7 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
   detail::broadcast(max_alpha, K::kMaxAlpha);
   detail::broadcast(min_alpha, K::kMinAlpha);
   detail::block_lane_offsets<S>(lx, ly);
+  const detail::TileCentres<S> centres(lx, ly, tb.x0, tb.y0);
   std::uint32_t max_last = 0;
   S bg_grad[NC] = {};
   const int W = in.grid->width;
@@ -471,21 +482,9 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
       detail::broadcast(col[ch], ch < nc ? in.colours[std::size_t(g) * std::size_t(nc) + std::size_t(ch)] : S(0));
     V z;
     detail::broadcast(z, s.z);
-    const detail::BlockRange range(s.rect, tb);
-    const detail::SplatBlockTerms<S> terms(s, lx, ly, tb.x0, tb.y0, range);
+    const detail::SplatSigma<S> sg(s);
     [[maybe_unused]] V sigma_cut;
     detail::broadcast(sigma_cut, s.sigma_cut);
-    // For absgrad: the per-pixel dL/dmean = -u (a dx + b dy, b dx + c dy) in column and row parts.
-    [[maybe_unused]] V a_dx[AbsGrad ? P : 1][NH], b_dy[AbsGrad ? P : 1][NH], c_dy[AbsGrad ? P : 1][NH];
-    if constexpr (AbsGrad) {
-      for (int bx = range.bx0; bx <= range.bx1; ++bx)
-        for (int h = 0; h < NH; ++h) a_dx[bx][h] = s.a * terms.dx[bx][h];
-      for (int by = range.by0; by <= range.by1; ++by)
-        for (int h = 0; h < NH; ++h) {
-          b_dy[by][h] = s.b * terms.dy[by][h];
-          c_dy[by][h] = s.c * terms.dy[by][h];
-        }
-    }
     // Pass 1: the chunks to visit and their sigma, in block order. Only the blocks where the
     // forward blended this splat (its block mask) can carry gradient, and, as in the forward, a
     // chunk without a lane inside the cut and in front of its pixel's last blended splat adds
@@ -499,7 +498,8 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
       const int b = std::countr_zero(blocks), bx = b % P, by = b / P;
       for (int h = 0; h < NH; ++h) {
         const int q = b * NH + h;
-        terms.sigma_into(sig[n], bx, by, h);
+        const V dy = sg.dy(centres, by, h);
+        sig[n] = sg.at(sg.dx(centres, bx, h), dy, sg.row(dy));
         item[n] = std::uint8_t(q);
         if constexpr (NH > 1) n += int(detail::any_lane((sig[n] <= sigma_cut) & __builtin_convertvector(k < last[q], M)));
         else ++n;
@@ -533,8 +533,7 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
       // alpha = min(0.99, o e^-sigma): no gradient through the clamp. u = -dL/dsigma.
       const M free = ok & (falloff < max_alpha);
       const V u = free ? v_alpha * falloff : zero;
-      const V& dx = terms.dx[bx][h];
-      const V& dy = terms.dy[by][h];
+      const V dx = sg.dx(centres, bx, h), dy = sg.dy(centres, by, h);
       const V ux = u * dx, uy = u * dy;
       lane[kU * NH + h] += u;
       lane[kUx * NH + h] += ux;
@@ -543,7 +542,8 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
       detail::fmadd_into(lane[kUxy * NH + h], ux, dy, lane[kUxy * NH + h]);
       detail::fmadd_into(lane[kUyy * NH + h], uy, dy, lane[kUyy * NH + h]);
       if constexpr (AbsGrad) {
-        V gx = u * (a_dx[bx][h] + b_dy[by][h]), gy = u * (terms.b_dx[bx][h] + c_dy[by][h]);  // +-dL/dmean per pixel
+        // +-dL/dmean per pixel: -u (a dx + b dy, b dx + c dy)
+        V gx = u * (s.a * dx + s.b * dy), gy = u * (s.b * dx + s.c * dy);
         detail::abs_into(gx, gx);
         detail::abs_into(gy, gy);
         lane[kAbsX * NH + h] += gx;
