@@ -347,3 +347,26 @@ TEST_CASE("pixel_rect: every pixel centre within the extent, clipped to the imag
   const PixelRect all = pixel_rect(10, 10, inf, inf, W, H);  // an infinite extent covers the image
   CHECK((all.x0 == 0 && all.y0 == 0 && all.x1 == W - 1 && all.y1 == H - 1));
 }
+
+TEST_CASE("BlockRange::blocks: the bit set of every block in the range, for every rectangle and clipped tile") {
+  // Every pixel rectangle against a full tile and against clipped edge tiles: the bit set must
+  // hold exactly the blocks of the block rows by0..by1 and columns bx0..bx1.
+  constexpr int TS = TileGrid::kTileSize, P = detail::TileBlocks::kPerSide;
+  const TileGrid grid(TS + 7, TS + 11);  // tile 3 is clipped to 7 x 11 pixels
+  int checked = 0;
+  for (const int tile : {0, 3}) {
+    const detail::TileBounds<float> tb(grid, tile);
+    for (int x0 = -2; x0 < 2 * TS; x0 += 1)
+      for (int x1 = x0 - 1; x1 < 2 * TS; x1 += 3)
+        for (int y0 = -1; y0 < 2 * TS; y0 += 2)
+          for (int y1 = y0 - 1; y1 < 2 * TS; y1 += 5) {
+            const detail::BlockRange r(PixelRect{x0, y0, x1, y1}, tb);
+            std::uint32_t want = 0;
+            for (int by = r.by0; by <= r.by1; ++by)
+              for (int bx = r.bx0; bx <= r.bx1; ++bx) want |= 1u << (by * P + bx);
+            REQUIRE(r.blocks() == want);
+            ++checked;
+          }
+  }
+  CHECK(checked > 10000);
+}

@@ -89,6 +89,15 @@ struct BlockRange {
     bx1 = c1 < c0 ? bx0 - 1 : c1 / B;
     by1 = r1 < r0 ? by0 - 1 : r1 / B;
   }
+  /// The blocks of the range as a bit set, bit b = by * kPerSide + bx (TileBlocks::block order).
+  std::uint32_t blocks() const {
+    constexpr int P = TileBlocks::kPerSide;
+    if (bx1 < bx0 || by1 < by0) return 0;
+    const std::uint32_t columns = (2u << bx1) - (1u << bx0);  // bits bx0 .. bx1
+    // One bit per row of the range, at the row's first block: sum of 2^(P by) = (2^(P (by1 + 1)) - 2^(P by0)) / (2^P - 1).
+    const std::uint64_t rows = ((std::uint64_t(1) << (P * (by1 + 1))) - (std::uint64_t(1) << (P * by0))) / ((1u << P) - 1u);
+    return columns * std::uint32_t(rows);
+  }
 };
 
 /// The pixel centres of one tile's blocks: x[bx][h] holds the x of the lanes of chunk h in block
@@ -276,27 +285,25 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
     }
   }
   const detail::TileCentres<S> centres(lx, ly, tb.x0, tb.y0);
-  // Blocks whose pixels have all stopped are skipped; the check runs every kCheckEvery splats so
-  // that the hot loop carries no horizontal reductions.
+  // Blocks whose pixels have all stopped are skipped (bit b of `live`: block b may still have a
+  // live pixel); the check runs every kCheckEvery splats so that the hot loop carries no
+  // horizontal reductions.
   constexpr int kCheckEvery = 8;
-  bool live[NB];
+  std::uint32_t live = 0;
   for (int b = 0; b < NB; ++b)
-    live[b] = TBk::kSide * (b % TBk::kPerSide) < tb.w && TBk::kSide * (b / TBk::kPerSide) < tb.h;
+    live |= std::uint32_t(TBk::kSide * (b % TBk::kPerSide) < tb.w && TBk::kSide * (b / TBk::kPerSide) < tb.h) << b;
   const std::uint64_t begin = in.bins->tile_offset[std::size_t(tile)], end = in.bins->tile_offset[std::size_t(tile) + 1];
   const std::uint32_t* list = in.bins->tile_list.data();
   std::uint64_t j = begin, fragments = 0;
   for (; j < end; ++j) {
     if ((j - begin) % kCheckEvery == 0 && j != begin) {
-      bool any = false;
-      for (int b = 0; b < NB; ++b) {
-        if (live[b]) {
-          M m = T[b * NH] > zero;
-          for (int h = 1; h < NH; ++h) m |= T[b * NH + h] > zero;
-          live[b] = detail::any_lane(m);
-        }
-        any = any || live[b];
+      for (std::uint32_t bits = live; bits != 0; bits &= bits - 1) {
+        const int b = std::countr_zero(bits);
+        M m = T[b * NH] > zero;
+        for (int h = 1; h < NH; ++h) m |= T[b * NH + h] > zero;
+        if (!detail::any_lane(m)) live &= ~(1u << b);
       }
-      if (!any) break;
+      if (live == 0) break;
     }
     if (j + kPrefetchDistance < end) {
       const std::uint32_t gp = list[j + kPrefetchDistance];
@@ -329,19 +336,15 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
     V sig[Q];
     std::uint8_t item[Q];
     int n = 0;
-    for (int by = range.by0; by <= range.by1; ++by) {
-      V dy[NH], row[NH];
+    for (std::uint32_t blocks = range.blocks() & live; blocks != 0; blocks &= blocks - 1) {
+      const int b = std::countr_zero(blocks), bx = b % TBk::kPerSide, by = b / TBk::kPerSide;
       for (int h = 0; h < NH; ++h) {
-        dy[h] = sg.dy(centres, by, h);
-        row[h] = sg.row(dy[h]);
+        const int q = b * NH + h;
+        const V dy = sg.dy(centres, by, h);
+        sig[n] = sg.at(sg.dx(centres, bx, h), dy, sg.row(dy));
+        item[n] = std::uint8_t(q);
+        n += int(detail::any_lane((sig[n] <= sigma_cut) & (T[q] > zero)));
       }
-      for (int bx = range.bx0; bx <= range.bx1; ++bx)
-        for (int h = 0; h < NH; ++h) {
-          const int q = (by * TBk::kPerSide + bx) * NH + h;
-          sig[n] = sg.at(sg.dx(centres, bx, h), dy[h], row[h]);
-          item[n] = std::uint8_t(q);
-          n += int(detail::any_lane((sig[n] <= sigma_cut) & (T[q] > zero)));
-        }
     }
     // Pass 2: blend the listed chunks.
     std::uint32_t blocks_blended = 0;
