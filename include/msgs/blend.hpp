@@ -121,10 +121,10 @@ struct TileCentres {
 };
 
 /// A splat's Mahalanobis half-distance sigma = 0.5 (a dx^2 + c dy^2) + b dx dy over the chunks of
-/// a tile, evaluated where it is needed from the tile's pixel centres: per block row the row part
-/// (dy, 0.5 c dy^2), per chunk the rest. No per-splat tables: filling them (up to 40 vectors
-/// stored per splat and intersection) cost a third of the blend forward. Forward and backward both
-/// evaluate sigma through at(), so their fragment decisions agree bit for bit.
+/// a tile, evaluated per chunk where it is needed from the tile's pixel centres. No per-splat
+/// tables of column and row terms: filling them (up to 40 vectors stored per intersection) cost
+/// more than the operations they saved (a sixth of the blend forward with AVX2). Forward and
+/// backward both evaluate sigma through at(), so their fragment decisions agree bit for bit.
 template <class S>
 struct SplatSigma {
   using V = typename BlockVec<S>::V;
