@@ -134,10 +134,11 @@ struct SplatSigma {
   /// Pixel centre x - mean x at chunk h of block column bx; dy likewise for block row by.
   V dx(const TileCentres<S>& c, int bx, int h) const { return c.x[bx][h] - mx; }
   V dy(const TileCentres<S>& c, int by, int h) const { return c.y[by][h] - my; }
-  /// The row part 0.5 c dy^2.
-  V row(const V& dy) const { return half_c * dy * dy; }
-  /// sigma from dx, dy and row(dy).
-  V at(const V& dx, const V& dy, const V& row_part) const { return (half_a * dx * dx + row_part) + (b * dx) * dy; }
+  /// sigma at chunk h of block (bx, by).
+  V at(const TileCentres<S>& c, int bx, int by, int h) const {
+    const V x = dx(c, bx, h), y = dy(c, by, h);
+    return (half_a * x * x + half_c * y * y) + (b * x) * y;
+  }
 };
 
 /// The pixel-centre offsets within a block of each lane: lx = x % 4 + 0.5, ly = y % 4 + 0.5.
@@ -340,8 +341,7 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
       const int b = std::countr_zero(blocks), bx = b % TBk::kPerSide, by = b / TBk::kPerSide;
       for (int h = 0; h < NH; ++h) {
         const int q = b * NH + h;
-        const V dy = sg.dy(centres, by, h);
-        sig[n] = sg.at(sg.dx(centres, bx, h), dy, sg.row(dy));
+        sig[n] = sg.at(centres, bx, by, h);
         item[n] = std::uint8_t(q);
         n += int(detail::any_lane((sig[n] <= sigma_cut) & (T[q] > zero)));
       }
@@ -501,8 +501,7 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
       const int b = std::countr_zero(blocks), bx = b % P, by = b / P;
       for (int h = 0; h < NH; ++h) {
         const int q = b * NH + h;
-        const V dy = sg.dy(centres, by, h);
-        sig[n] = sg.at(sg.dx(centres, bx, h), dy, sg.row(dy));
+        sig[n] = sg.at(centres, bx, by, h);
         item[n] = std::uint8_t(q);
         if constexpr (NH > 1) n += int(detail::any_lane((sig[n] <= sigma_cut) & __builtin_convertvector(k < last[q], M)));
         else ++n;
