@@ -346,16 +346,23 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
         n += int(detail::any_lane((sig[n] <= sigma_cut) & (T[q] > zero)));
       }
     }
-    // Pass 2: blend the listed chunks.
-    std::uint32_t blocks_blended = 0;
+    // Pass 2: the alpha of every listed chunk, in a loop of its own. Its iterations are
+    // independent, so the core overlaps their exponentials; inside the blending loop each one
+    // would start a long dependency chain that the next chunk's work could hardly hide.
+    V alp[Q];
     for (int i = 0; i < n; ++i) {
-      const int q = item[i];
       detail::FragmentAlpha<S> f;
       f.sigma = sig[i];
       detail::alpha_from_sigma(f, s.o, max_alpha);
-      const V alpha = f.alpha;
+      alp[i] = f.alpha;
+    }
+    // Pass 3: blend the listed chunks.
+    std::uint32_t blocks_blended = 0;
+    for (int i = 0; i < n; ++i) {
+      const int q = item[i];
+      const V alpha = alp[i];
       const V t = T[q];
-      const M ok = (t > zero) & (f.sigma >= zero) & (alpha >= min_alpha);
+      const M ok = (t > zero) & (sig[i] >= zero) & (alpha >= min_alpha);
       const V next_T = t * (one - alpha);
       const M stop = ok & (next_T <= min_T);
       const M take = ok & ~stop;
@@ -507,7 +514,17 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
         else ++n;
       }
     }
-    // Pass 2: the gradient of each listed chunk. Each pixel's state (T, B) is touched once per
+    // Pass 2: alpha and the unclamped falloff of every listed chunk, in a loop of independent
+    // iterations (as in the forward).
+    V alp[Q], fal[Q];
+    for (int i = 0; i < n; ++i) {
+      detail::FragmentAlpha<S> f;
+      f.sigma = sig[i];
+      detail::alpha_from_sigma(f, s.o, max_alpha);
+      alp[i] = f.alpha;
+      fal[i] = f.falloff;
+    }
+    // Pass 3: the gradient of each listed chunk. Each pixel's state (T, B) is touched once per
     // splat and each accumulator takes its chunks in block order, whatever the vector width.
     V lane[NL * NH];  // [accumulator][chunk]
     // Unrolled, so that GCC does not turn it into a call to memset per intersection (with AVX2
@@ -516,11 +533,8 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
     for (int l = 0; l < NL * NH; ++l) lane[l] = zero;
     for (int i = 0; i < n; ++i) {
       const int q = item[i], b = q / NH, h = q % NH, bx = b % P, by = b / P;
-      detail::FragmentAlpha<S> f;
-      f.sigma = sig[i];
-      detail::alpha_from_sigma(f, s.o, max_alpha);
-      const V alpha = f.alpha, falloff = f.falloff;
-      const M ok = __builtin_convertvector(k < last[q], M) & (f.sigma >= zero) & (alpha >= min_alpha);
+      const V alpha = alp[i], falloff = fal[i];
+      const M ok = __builtin_convertvector(k < last[q], M) & (sig[i] >= zero) & (alpha >= min_alpha);
       const V ra = one / (one - alpha);
       const V Ti = ok ? T[q] * ra : T[q];
       const V fac = alpha * Ti;
