@@ -514,15 +514,14 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
         else ++n;
       }
     }
-    // Pass 2: alpha and the unclamped falloff of every listed chunk, in a loop of independent
-    // iterations (as in the forward).
-    V alp[Q], fal[Q];
+    // Pass 2: alpha of every listed chunk, in a loop of independent iterations (as in the
+    // forward).
+    V alp[Q];
     for (int i = 0; i < n; ++i) {
       detail::FragmentAlpha<S> f;
       f.sigma = sig[i];
       detail::alpha_from_sigma(f, s.o, max_alpha);
       alp[i] = f.alpha;
-      fal[i] = f.falloff;
     }
     // Pass 3: the gradient of each listed chunk. Each pixel's state (T, B) is touched once per
     // splat and each accumulator takes its chunks in block order, whatever the vector width.
@@ -533,7 +532,7 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
     for (int l = 0; l < NL * NH; ++l) lane[l] = zero;
     for (int i = 0; i < n; ++i) {
       const int q = item[i], b = q / NH, h = q % NH, bx = b % P, by = b / P;
-      const V alpha = alp[i], falloff = fal[i];
+      const V alpha = alp[i];
       const M ok = __builtin_convertvector(k < last[q], M) & (sig[i] >= zero) & (alpha >= min_alpha);
       const V ra = one / (one - alpha);
       const V Ti = ok ? T[q] * ra : T[q];
@@ -546,9 +545,10 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
       detail::fmadd_where(B[q], ok, fac, cd);
       for (int ch = 0; ch < NC; ++ch) detail::fmadd_where(lane[(kCol + ch) * NH + h], ok, fac, dimg[ch][q]);
       if constexpr (Depth) detail::fmadd_where(lane[kDep * NH + h], ok, fac, dD[q]);
-      // alpha = min(0.99, o e^-sigma): no gradient through the clamp. u = -dL/dsigma.
-      const M free = ok & (falloff < max_alpha);
-      const V u = free ? v_alpha * falloff : zero;
+      // alpha = min(0.99, o e^-sigma): no gradient through the clamp. u = -dL/dsigma = dL/dalpha
+      // o e^-sigma, and where the clamp does not hold (alpha < 0.99) o e^-sigma is alpha itself.
+      const M free = ok & (alpha < max_alpha);
+      const V u = free ? v_alpha * alpha : zero;
       const V dx = sg.dx(centres, bx, h), dy = sg.dy(centres, by, h);
       const V ux = u * dx, uy = u * dy;
       lane[kU * NH + h] += u;
