@@ -153,21 +153,20 @@ inline void block_lane_offsets(typename BlockVec<S>::V* lx, typename BlockVec<S>
     }
 }
 
-/// A splat's fragment opacity over one chunk of a block: sigma, e = exp(-sigma), the unclamped
-/// falloff o e and alpha = min(0.99, o e). The forward and the backward both fill it through
-/// alpha_from_sigma, so that they take and skip exactly the same fragments.
+/// A splat's fragment opacity alpha = min(0.99, o e^-sigma) over the n listed chunks of an
+/// intersection, from their sigma. The forward and the backward both evaluate it here, so that
+/// they take and skip exactly the same fragments. The chunks get a loop of their own: its
+/// iterations are independent, so the core overlaps their exponentials, where inside a blending
+/// loop each one would start a long dependency chain that the next chunk's work (held back by the
+/// reorder window) could hardly hide.
 template <class S>
-struct FragmentAlpha {
-  using V = typename BlockVec<S>::V;
-  V sigma, e, falloff, alpha;
-};
-
-/// The rest of the alpha evaluation once out.sigma is set.
-template <class S>
-inline void alpha_from_sigma(FragmentAlpha<S>& out, S opacity, const typename BlockVec<S>::V& max_alpha) {
-  exp_neg_into(out.e, out.sigma);
-  out.falloff = opacity * out.e;
-  min_into(out.alpha, out.falloff, max_alpha);  // falloff < 0.99 ? falloff : 0.99
+inline void listed_alphas(const typename BlockVec<S>::V* sigma, int n, S opacity,
+                          const typename BlockVec<S>::V& max_alpha, typename BlockVec<S>::V* alpha) {
+  for (int i = 0; i < n; ++i) {
+    typename BlockVec<S>::V e;
+    exp_neg_into(e, sigma[i]);
+    min_into(alpha[i], opacity * e, max_alpha);  // o e < 0.99 ? o e : 0.99
+  }
 }
 
 }  // namespace detail
@@ -346,16 +345,9 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
         n += int(detail::any_lane((sig[n] <= sigma_cut) & (T[q] > zero)));
       }
     }
-    // Pass 2: the alpha of every listed chunk, in a loop of its own. Its iterations are
-    // independent, so the core overlaps their exponentials; inside the blending loop each one
-    // would start a long dependency chain that the next chunk's work could hardly hide.
+    // Pass 2: the alpha of every listed chunk, in a loop of its own (detail::listed_alphas).
     V alp[Q];
-    for (int i = 0; i < n; ++i) {
-      detail::FragmentAlpha<S> f;
-      f.sigma = sig[i];
-      detail::alpha_from_sigma(f, s.o, max_alpha);
-      alp[i] = f.alpha;
-    }
+    detail::listed_alphas<S>(sig, n, s.o, max_alpha, alp);
     // Pass 3: blend the listed chunks.
     std::uint32_t blocks_blended = 0;
     for (int i = 0; i < n; ++i) {
@@ -514,15 +506,9 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
         else ++n;
       }
     }
-    // Pass 2: alpha of every listed chunk, in a loop of independent iterations (as in the
-    // forward).
+    // Pass 2: the alpha of every listed chunk, as in the forward.
     V alp[Q];
-    for (int i = 0; i < n; ++i) {
-      detail::FragmentAlpha<S> f;
-      f.sigma = sig[i];
-      detail::alpha_from_sigma(f, s.o, max_alpha);
-      alp[i] = f.alpha;
-    }
+    detail::listed_alphas<S>(sig, n, s.o, max_alpha, alp);
     // Pass 3: the gradient of each listed chunk. Each pixel's state (T, B) is touched once per
     // splat and each accumulator takes its chunks in block order, whatever the vector width.
     V lane[NL * NH];  // [accumulator][chunk]
