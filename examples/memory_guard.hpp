@@ -33,10 +33,12 @@ inline std::uint64_t available_memory_bytes() {
 
 /// Bytes a training step keeps per Gaussian of a model with `channels` colour channels of `sh_coeffs`
 /// SH coefficients each: parameters, gradients and both Adam moments (4 copies of 11 geometry
-/// floats and the colour floats), plus the rasteriser's projection buffers and the density
-/// statistics (at most 256 bytes).
+/// floats and the colour floats), the spare colour planes refinement gathers into (one more copy
+/// of the colour floats), plus the rasteriser's projection buffers and the density statistics (at
+/// most 256 bytes).
 inline std::size_t training_bytes_per_gaussian(int channels, int sh_coeffs) {
-  return 4 * sizeof(float) * (11 + std::size_t(channels) * std::size_t(sh_coeffs)) + 256;
+  const std::size_t colour = std::size_t(channels) * std::size_t(sh_coeffs);
+  return sizeof(float) * (4 * (11 + colour) + colour) + 256;
 }
 
 /// The model size at which a run stops: three quarters of the available memory at the start, over

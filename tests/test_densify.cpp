@@ -145,6 +145,19 @@ TEST_CASE("apply / apply_zero_fresh move whole rows of the model and of optimise
 
   Model small = make_model(2);
   CHECK_THROWS_AS(apply(plan, small), std::invalid_argument);
+
+  // Through a spare (the band planes gathered out of place): the same rows, and the spare ends up
+  // with the old planes of the last array applied.
+  std::vector<float> spare;
+  Model m2 = ref, state2 = make_model(3);
+  apply(plan, m2, spare);
+  apply_zero_fresh(plan, state2, spare);
+  CHECK(m2.sh == m.sh);
+  CHECK(m2.means == m.means);
+  CHECK(state2.sh == state.sh);
+  CHECK(state2.quats == state.quats);
+  CHECK(spare == make_model(3).sh);
+  CHECK_THROWS_AS(apply(plan, small, spare), std::invalid_argument);
 }
 
 TEST_CASE("screen-space statistics: NDC scaling, visible views only, max relative radius") {
@@ -727,6 +740,7 @@ TEST_CASE("statistics over a row list equal the statistics over every row when t
 
 TEST_CASE("in-place row application equals a plain out-of-place copy for random plans, planes, growth and shrinkage") {
   std::mt19937 rng(11);
+  std::vector<float> spare;  // reused across trials, as a refinement reuses it: sizes up and down
   for (int trial = 0; trial < 200; ++trial) {
     const std::size_t n = 1 + rng() % 60, planes = 1 + rng() % 3, w = 1 + rng() % 5;
     // A refinement-like plan (ascending survivors, then copies, fresh and new rows) or an arbitrary one.
@@ -758,6 +772,10 @@ TEST_CASE("in-place row application equals a plain out-of-place copy for random 
       std::vector<float> got = rows;
       detail::apply_rows_impl(plan, got, w, zero_fresh, "test", planes);
       CHECK(got == want);
+      std::vector<float> gathered = rows;
+      detail::gather_rows(plan, gathered, spare, w, planes, zero_fresh, "test");
+      CHECK(gathered == want);
+      CHECK(spare.size() == rows.size());  // the spare holds the old values' memory
     }
   }
 }
