@@ -821,6 +821,10 @@ class DensityControl {
       reset_opacity(model, states...);
       rep.opacity_reset = true;
     }
+    if (step + 1 >= cfg_.refine_stop) {  // no refinement follows: give the spare's memory back
+      std::vector<float>().swap(spare_float_.values);
+      std::vector<double>().swap(spare_double_.values);
+    }
     rep.after = model.size();
     return rep;
   }
@@ -1114,7 +1118,8 @@ class DensityControl {
   }
 
   /// Memory the band planes of a refinement are gathered into (detail::gather_rows), kept from
-  /// one refinement to the next; a copy of the controller starts without it.
+  /// one refinement to the next and released after the last step before refine_stop; a copy of the
+  /// controller starts without it.
   template <class T>
   struct Spare {
     std::vector<T> values;
