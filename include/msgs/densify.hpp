@@ -318,6 +318,20 @@ void for_each_array(GaussianModel<G, S>& m, F&& f) {
   f(m.opacity_logits, std::size_t(1), std::size_t(1));
   f(m.sh, static_cast<std::size_t>(G::sh_coeffs), static_cast<std::size_t>(G::bands));
 }
+
+/// Apply `plan` to every array of a model or of optimiser state in the model's layout: fresh rows
+/// zero with `zero_fresh`; with a `spare`, the band planes gathered out of place through it
+/// (gather_rows), the geometry arrays moved in place either way.
+template <class G, class S>
+void apply_arrays(const RefinePlan& plan, GaussianModel<G, S>& m, bool zero_fresh,
+                  std::type_identity_t<std::vector<S>>* spare, const char* what) {
+  m.check_consistent();
+  plan.validate();
+  for_each_array(m, [&](auto& v, std::size_t w, std::size_t planes) {
+    if (spare && &v == &m.sh) gather_rows(plan, v, *spare, w, planes, zero_fresh, what);
+    else apply_rows_impl(plan, v, w, zero_fresh, what, planes, true);
+  });
+}
 }  // namespace detail
 
 /// Apply `plan` to a per-Gaussian array of `width` values per row (rows copied, `none` rows zero).
@@ -337,11 +351,7 @@ void apply_rows_zero_fresh(const RefinePlan& plan, std::vector<T>& rows, std::si
 /// (SH of all bands included).
 template <class G, class S>
 void apply(const RefinePlan& plan, GaussianModel<G, S>& model) {
-  model.check_consistent();
-  plan.validate();
-  detail::for_each_array(model, [&](auto& v, std::size_t w, std::size_t planes) {
-    detail::apply_rows_impl(plan, v, w, false, "apply(model)", planes, true);
-  });
+  detail::apply_arrays(plan, model, false, nullptr, "apply(model)");
 }
 
 /// `apply` with the band planes gathered out of place through `spare` (detail::gather_rows): one
@@ -350,35 +360,21 @@ void apply(const RefinePlan& plan, GaussianModel<G, S>& model) {
 /// model or state of the same layout. The geometry arrays are moved in place. Same values as apply.
 template <class G, class S>
 void apply(const RefinePlan& plan, GaussianModel<G, S>& model, std::vector<S>& spare) {
-  model.check_consistent();
-  plan.validate();
-  detail::for_each_array(model, [&](auto& v, std::size_t w, std::size_t planes) {
-    if (&v == &model.sh) detail::gather_rows(plan, v, spare, w, planes, false, "apply(model)");
-    else detail::apply_rows_impl(plan, v, w, false, "apply(model)", planes, true);
-  });
+  detail::apply_arrays(plan, model, false, &spare, "apply(model)");
 }
 
 /// Apply `plan` to optimiser state stored with the model's layout (Adam's exp_avg, exp_avg_sq):
 /// rows of surviving Gaussians follow them, fresh Gaussians get zeros.
 template <class G, class S>
 void apply_zero_fresh(const RefinePlan& plan, GaussianModel<G, S>& state) {
-  state.check_consistent();
-  plan.validate();
-  detail::for_each_array(state, [&](auto& v, std::size_t w, std::size_t planes) {
-    detail::apply_rows_impl(plan, v, w, true, "apply_zero_fresh(state)", planes, true);
-  });
+  detail::apply_arrays(plan, state, true, nullptr, "apply_zero_fresh(state)");
 }
 
 /// `apply_zero_fresh` with the band planes gathered out of place through `spare`, as
 /// apply(plan, model, spare). Same values as apply_zero_fresh.
 template <class G, class S>
 void apply_zero_fresh(const RefinePlan& plan, GaussianModel<G, S>& state, std::vector<S>& spare) {
-  state.check_consistent();
-  plan.validate();
-  detail::for_each_array(state, [&](auto& v, std::size_t w, std::size_t planes) {
-    if (&v == &state.sh) detail::gather_rows(plan, v, spare, w, planes, true, "apply_zero_fresh(state)");
-    else detail::apply_rows_impl(plan, v, w, true, "apply_zero_fresh(state)", planes, true);
-  });
+  detail::apply_arrays(plan, state, true, &spare, "apply_zero_fresh(state)");
 }
 
 /// The plan that puts the rows of `model` into spatial order (spatial_order.hpp), for the model and
@@ -953,8 +949,7 @@ class DensityControl {
     plan = plan.then(p_out);
 
     // ---- apply once, then place the split samples' means and scales ----
-    if (auto* spare = spare_for<S>()) apply(plan, model, *spare);
-    else apply(plan, model);
+    detail::apply_arrays(plan, model, false, spare_for<S>(), "apply(model)");
     for (std::size_t f = 0; f < grown_row.size(); ++f) {
       const std::size_t r = grown_row[f];
       if (r < rest) continue;
@@ -1142,8 +1137,7 @@ class DensityControl {
   /// Optimiser state follows the plan (zeros for new rows), its band planes through the spare.
   template <class G, class T>
   void apply_state(const RefinePlan& plan, GaussianModel<G, T>& state) {
-    if (auto* spare = spare_for<T>()) apply_zero_fresh(plan, state, *spare);
-    else apply_zero_fresh(plan, state);
+    detail::apply_arrays(plan, state, true, spare_for<T>(), "apply_zero_fresh(state)");
   }
 
   DensifyConfig cfg_;
