@@ -104,6 +104,32 @@ TEST_CASE("8-bit TIFF written with libtiff directly reads as value / 255") {
   CHECK(img.at(3, 1, 0) == doctest::Approx(4.0f / 255.0f));
 }
 
+TEST_CASE("a YCbCr TIFF is refused with a clear error, not read past its rows") {
+  // Found by fuzz_image: 16-bit YCbCr with the default 2x2 chroma subsampling, whose rows are
+  // shorter than width x samples.
+  const auto dir = scratch("tiff_ycbcr");
+  const auto p = dir / "a.tif";
+  TIFF* tif = TIFFOpen(p.c_str(), "w");
+  REQUIRE(tif);
+  TIFFSetField(tif, TIFFTAG_IMAGEWIDTH, 4u);
+  TIFFSetField(tif, TIFFTAG_IMAGELENGTH, 2u);
+  TIFFSetField(tif, TIFFTAG_BITSPERSAMPLE, 8);
+  TIFFSetField(tif, TIFFTAG_SAMPLESPERPIXEL, 3);
+  TIFFSetField(tif, TIFFTAG_PHOTOMETRIC, PHOTOMETRIC_YCBCR);
+  TIFFSetField(tif, TIFFTAG_PLANARCONFIG, PLANARCONFIG_CONTIG);
+  std::vector<unsigned char> row(64, 128);
+  for (unsigned y = 0; y < 2; ++y) TIFFWriteScanline(tif, row.data(), y, 0);
+  TIFFClose(tif);
+  try {
+    (void)read_image(p);
+    FAIL("a YCbCr TIFF was read");
+  } catch (const std::exception& e) {
+    const std::string what = e.what();
+    CHECK(what.find("a.tif") != std::string::npos);
+    CHECK(what.find("YCbCr") != std::string::npos);
+  }
+}
+
 TEST_CASE("npy round trip is exact and has the NumPy header") {
   const auto dir = scratch("npy");
   auto img = random_image(5, 3, 2, 1);

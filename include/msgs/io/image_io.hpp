@@ -277,6 +277,8 @@ inline Image<float> read_tiff(const std::filesystem::path& p, std::size_t file_s
                 " (need 8/16-bit unsigned or 32-bit float)"));
   if (spp < 1 || spp > 4) fail(p, cat("unsupported TIFF samples per pixel ", std::to_string(spp), " (need 1 to 4)"));
   if (photo == PHOTOMETRIC_PALETTE) fail(p, "palette TIFF images are not supported");
+  // YCbCr samples are not colours, and subsampled chroma makes a row shorter than width x samples.
+  if (photo == PHOTOMETRIC_YCBCR) fail(p, "YCbCr TIFF images are not supported (save the image as RGB)");
   if (w == 0 || h == 0) fail(p, "TIFF has an empty image");
   // LZW, Deflate, ZSTD or LZMA strips may compress well, but not beyond ~4096:1.
   check_plausible_size(p, "TIFF", w, h, spp, double(w) * double(h) * double(spp) * double(bits / 8), file_size,
@@ -306,7 +308,12 @@ inline Image<float> read_tiff(const std::filesystem::path& p, std::size_t file_s
     std::uint32_t tw = 0, th = 0;
     TIFFGetField(tif, TIFFTAG_TILEWIDTH, &tw);
     TIFFGetField(tif, TIFFTAG_TILELENGTH, &th);
-    std::vector<unsigned char> tile(static_cast<std::size_t>(TIFFTileSize(tif)));
+    if (tw == 0 || th == 0) fail(p, "TIFF tile size is zero");
+    const tmsize_t tile_bytes = TIFFTileSize(tif);
+    if (tile_bytes <= 0 || double(tile_bytes) < double(tw) * double(th) * double(spp) * double(bits / 8))
+      fail(p, cat("TIFF tiles hold fewer bytes than ", std::to_string(tw), "x", std::to_string(th), " pixels of ",
+                  std::to_string(spp), " samples"));
+    std::vector<unsigned char> tile(static_cast<std::size_t>(tile_bytes));
     for (std::uint32_t ty = 0; ty < h; ty += th)
       for (std::uint32_t tx = 0; tx < w; tx += tw) {
         if (TIFFReadTile(tif, tile.data(), tx, ty, 0, 0) < 0)
@@ -318,8 +325,12 @@ inline Image<float> read_tiff(const std::filesystem::path& p, std::size_t file_s
       }
     return img;
   }
-  std::vector<unsigned char> line(static_cast<std::size_t>(TIFFScanlineSize(tif)));
   const int planes = planar == PLANARCONFIG_SEPARATE ? spp : 1;
+  const tmsize_t line_bytes = TIFFScanlineSize(tif);
+  if (line_bytes <= 0 || double(line_bytes) < double(w) * double(spp / planes) * double(bits / 8))
+    fail(p, cat("TIFF rows hold fewer bytes than ", std::to_string(w), " pixels of ", std::to_string(spp / planes),
+                " samples"));
+  std::vector<unsigned char> line(static_cast<std::size_t>(line_bytes));
   for (int plane = 0; plane < planes; ++plane)
     for (std::uint32_t y = 0; y < h; ++y) {
       if (TIFFReadScanline(tif, line.data(), y, static_cast<std::uint16_t>(plane)) < 0)
