@@ -83,17 +83,24 @@ TEST_CASE("16-bit TIFF round trip, 1 and 3 channels") {
   }
 }
 
-TEST_CASE("8-bit TIFF written with libtiff directly reads as value / 255") {
-  const auto dir = scratch("tiff8");
-  const auto p = dir / "a.tif";
+/// A 4x2 8-bit contiguous TIFF opened for writing with libtiff itself (nullptr if it cannot be).
+static TIFF* open_tiff_8bit(const fs::path& p, int samples, int photometric) {
   TIFF* tif = TIFFOpen(p.c_str(), "w");
-  REQUIRE(tif);
+  if (!tif) return nullptr;
   TIFFSetField(tif, TIFFTAG_IMAGEWIDTH, 4u);
   TIFFSetField(tif, TIFFTAG_IMAGELENGTH, 2u);
   TIFFSetField(tif, TIFFTAG_BITSPERSAMPLE, 8);
-  TIFFSetField(tif, TIFFTAG_SAMPLESPERPIXEL, 1);
-  TIFFSetField(tif, TIFFTAG_PHOTOMETRIC, PHOTOMETRIC_MINISBLACK);
+  TIFFSetField(tif, TIFFTAG_SAMPLESPERPIXEL, samples);
+  TIFFSetField(tif, TIFFTAG_PHOTOMETRIC, photometric);
   TIFFSetField(tif, TIFFTAG_PLANARCONFIG, PLANARCONFIG_CONTIG);
+  return tif;
+}
+
+TEST_CASE("8-bit TIFF written with libtiff directly reads as value / 255") {
+  const auto dir = scratch("tiff8");
+  const auto p = dir / "a.tif";
+  TIFF* tif = open_tiff_8bit(p, 1, PHOTOMETRIC_MINISBLACK);
+  REQUIRE(tif);
   unsigned char rows[2][4] = {{0, 51, 102, 255}, {1, 2, 3, 4}};
   for (unsigned y = 0; y < 2; ++y) REQUIRE(TIFFWriteScanline(tif, rows[y], y, 0) >= 0);
   TIFFClose(tif);
@@ -109,14 +116,8 @@ TEST_CASE("a YCbCr TIFF is refused with a clear error, not read past its rows") 
   // shorter than width x samples.
   const auto dir = scratch("tiff_ycbcr");
   const auto p = dir / "a.tif";
-  TIFF* tif = TIFFOpen(p.c_str(), "w");
+  TIFF* tif = open_tiff_8bit(p, 3, PHOTOMETRIC_YCBCR);
   REQUIRE(tif);
-  TIFFSetField(tif, TIFFTAG_IMAGEWIDTH, 4u);
-  TIFFSetField(tif, TIFFTAG_IMAGELENGTH, 2u);
-  TIFFSetField(tif, TIFFTAG_BITSPERSAMPLE, 8);
-  TIFFSetField(tif, TIFFTAG_SAMPLESPERPIXEL, 3);
-  TIFFSetField(tif, TIFFTAG_PHOTOMETRIC, PHOTOMETRIC_YCBCR);
-  TIFFSetField(tif, TIFFTAG_PLANARCONFIG, PLANARCONFIG_CONTIG);
   std::vector<unsigned char> row(64, 128);
   for (unsigned y = 0; y < 2; ++y) TIFFWriteScanline(tif, row.data(), y, 0);
   TIFFClose(tif);
