@@ -3,6 +3,7 @@
 #include <doctest/doctest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -465,6 +466,46 @@ TEST_CASE("prune by opacity (0.1 MSAD, 0.005 default) and by 3-D size after the 
   // Default: opacity < 0.005; after the first reset (3000) scale > 0.1.
   CHECK(pruned_rows(DensifyConfig::gsplat_default(), 600) == V{0, 2, 3});
   CHECK(pruned_rows(DensifyConfig::gsplat_default(), 3100) == V{0});
+}
+
+TEST_CASE("a row with a non-finite value in any array or band plane is pruned, its neighbours kept") {
+  // Enough rows for several of the finiteness pass's chunks on every thread; one broken value per
+  // broken row, in each array and in each band plane (first and last coefficient).
+  const std::size_t n = 20000;
+  const Model ref = make_model(n);
+  const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+  std::vector<std::uint32_t> broken;
+  Model m = ref;
+  auto mark = [&](std::size_t row, float* v, float bad) {
+    *v = bad;
+    broken.push_back(std::uint32_t(row));
+  };
+  mark(3, &m.means[3 * 3 + 1], nan);
+  mark(4100, &m.log_scales[3 * 4100 + 2], inf);
+  mark(8191, &m.quats[4 * 8191 + 3], -inf);
+  mark(8192, &m.opacity_logits[8192], nan);
+  for (int c = 0; c < G::bands; ++c) {
+    const std::size_t r1 = 9000 + std::size_t(c) * 1013, r2 = r1 + 1;
+    mark(r1, &m.sh_at(r1, 0, c), nan);
+    mark(r2, &m.sh_at(r2, G::sh_coeffs - 1, c), inf);
+  }
+  mark(n - 1, &m.sh_at(n - 1, 1, G::bands - 1), nan);
+  std::sort(broken.begin(), broken.end());
+  DensityControl dc(DensifyConfig::gsplat_default(), 1, 0);
+  RefineCounts c;
+  const RefinePlan plan = dc.refine(600, m, c);  // no statistics: nothing grows, only pruning
+  CHECK(c.pruned == broken.size());
+  REQUIRE(m.size() == n - broken.size());
+  std::size_t b = 0, f = 0;
+  for (std::uint32_t i = 0; i < n; ++i) {
+    if (b < broken.size() && broken[b] == i) {
+      ++b;
+      continue;
+    }
+    REQUIRE(plan.source[f] == i);
+    CHECK(same_row(m, f, ref, i));
+    ++f;
+  }
 }
 
 TEST_CASE("screen-space split and prune apply only until screen_stop") {
