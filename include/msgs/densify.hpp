@@ -1062,9 +1062,8 @@ class DensityControl {
   template <class G, class S>
   static double max_scale(const GaussianModel<G, S>& m, std::size_t i) { return max_scale(&m.log_scales[3 * i]); }
 
-  /// Whether every parameter of each row is finite: [N] flags, 1 = finite. A pass per array, each
-  /// plane read in order without an early exit, so that it streams the model at memory speed
-  /// (asked row by row it was most of the pruning's time: seven planes' rows per Gaussian).
+  /// Whether every parameter of each row is finite: [N] flags, 1 = finite. A pass per array and
+  /// per band plane, each read in order without an early exit, so that it streams the model.
   template <class G, class S>
   static std::vector<std::uint8_t> rows_finite(const GaussianModel<G, S>& m) {
     const std::size_t n = m.size();
