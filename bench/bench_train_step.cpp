@@ -17,7 +17,9 @@
 // bound_ratio_visible is the same for the Gaussians the view saw only (the bound of a step that
 // touches only those). forward_ms, loss_ms, backward_ms (with the regulariser), adam_ms and
 // stats_ms split the step into its stages (milliseconds per step); project_ms, bin_ms and blend_ms
-// split the forward, blend_backward_ms and gaussians_backward_ms the backward.
+// split the forward, blend_backward_ms and gaussians_backward_ms the backward. Except in the
+// dense_zeroed cases, the colour update of the visible Gaussians runs inside the backward (as in
+// training, TrainOptions::fused_colour) and counts in gaussians_backward_ms, not in adam_ms.
 //
 //   ./build/bench/bench_train_step
 //   ./build/bench/bench_train_step --benchmark_filter='100k_240x180' --benchmark_min_time=0.2   # the demo's image size
@@ -42,6 +44,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <map>
+#include <optional>
 #include <memory>
 #include <random>
 #include <span>
@@ -162,10 +165,11 @@ constexpr RasterOptions kStepRaster{.absgrad = true, .single_precision = true};
 /// change is adapted here only.
 /// How the step updates what the view did not see. `dense`: as Trainer::train with dense Adam, the
 /// unseen gradient rows never written and taken as zero by Adam (Unlisted::zero_gradient), except
-/// at a step of the scale regulariser; `dense_zeroed`: the same update with the unseen rows zeroed
-/// by the backward and read by Adam (GradientFill::dense, the formulation before 2026-11-25, the
-/// same bits); `sparse`: TrainOptions::sparse, gradients, Adam and the regulariser for the visible
-/// rows only.
+/// at a step of the scale regulariser, and the colour update of the visible rows taken inside the
+/// backward (TrainOptions::fused_colour); `dense_zeroed`: the same update with every gradient row
+/// stored, the unseen ones zeroed by the backward, and read by Adam (GradientFill::dense, the
+/// formulation before 2026-11-25, the same bits); `sparse`: TrainOptions::sparse, gradients, Adam
+/// and the regulariser for the visible rows only, the colour update inside the backward.
 enum class AdamMode { dense, dense_zeroed, sparse };
 
 template <class G>
@@ -231,12 +235,20 @@ struct StepBench {
     const bool sparse = mode == AdamMode::sparse;
     const bool seen_only = sparse || (mode == AdamMode::dense && !reg_step);
     const std::vector<std::uint32_t>* rows = seen_only ? &seen : nullptr;
-    raster.backward(d_image, nullptr, nullptr, grads, seen_only ? GradientFill::visible : GradientFill::dense);
+    const Unlisted unlisted = sparse ? Unlisted::untouched : Unlisted::zero_gradient;
+    const bool fuse = mode != AdamMode::dense_zeroed;
+    std::optional<typename Adam<G, float>::ColourStep> colour;
+    if (fuse) colour.emplace(adam.begin_colour(model, first, count));
+    raster.backward(d_image, nullptr, nullptr, grads, seen_only ? GradientFill::visible : GradientFill::dense,
+                    fuse ? &*colour : nullptr);
     if (reg_step)
       scale_reg<float>(std::span<const float>(model.log_scales), std::span<float>(grads.model.log_scales),
                        ScaleRegConfig{}, rows);
     const auto t3 = clock::now();
-    adam.step(model, grads.model, AdamMask::band(first, count), rows, sparse ? Unlisted::untouched : Unlisted::zero_gradient);
+    AdamMask mask = AdamMask::band(first, count);
+    if (fuse) mask.sh = false;
+    adam.step(model, grads.model, mask, rows, unlisted);
+    if (fuse) adam.finish_colour(*colour, seen, unlisted);
     const auto t4 = clock::now();
     if (density.accumulates_at(step_index))
       density.observe_gradients(step_index, first, grads, raster.radii(), cam.width, cam.height, &seen);

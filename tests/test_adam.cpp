@@ -325,3 +325,46 @@ TEST_CASE("Unlisted::zero_gradient: dense Adam bit for bit, without reading the 
   CHECK(bits(p.means, pl.means));
   CHECK(bits(p.sh, pl.sh));
 }
+
+TEST_CASE("colour step applied row by row (a fused backward): the bits of one step, dense and sparse") {
+  const std::size_t n = 3000;
+  std::vector<std::uint32_t> rows;
+  std::mt19937 rng(41);
+  for (std::uint32_t i = 0; i < n; ++i)
+    if (rng() % 3 != 0 || i == 0 || i == n - 1) rows.push_back(i);
+  const auto bits = [](const std::vector<float>& a, const std::vector<float>& b) {
+    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0;
+  };
+  for (const msgs::Unlisted unlisted : {msgs::Unlisted::zero_gradient, msgs::Unlisted::untouched}) {
+    WarmStart w(n, 51);
+    auto& [p, g, q, whole, split] = w;
+    for (const auto& [first, count] : {std::pair{2, 3}, std::pair{6, 1}, std::pair{0, 7}}) {
+      const msgs::AdamMask mask = msgs::AdamMask::band(first, count);
+      whole.step(p, g, mask, &rows, unlisted);
+      // The geometry as usual, the colour row by row in a scrambled order, then the rest.
+      const auto colour = split.begin_colour(q, first, count);
+      msgs::AdamMask geometry = mask;
+      geometry.sh = false;
+      split.step(q, g, geometry, &rows, unlisted);
+      std::vector<std::uint32_t> order = rows;
+      std::shuffle(order.begin(), order.end(), rng);
+      for (std::uint32_t r : order)
+        for (int c = first; c < first + count; ++c) colour.apply(r, c, g.sh_row(r, c));
+      split.finish_colour(colour, rows, unlisted);
+      CHECK(split.steps.sh == whole.steps.sh);
+      CHECK(split.iteration == whole.iteration);
+      for (const auto& [a, b] : {std::pair{&p, &q}, std::pair{&whole.exp_avg, &split.exp_avg},
+                                 std::pair{&whole.exp_avg_sq, &split.exp_avg_sq}}) {
+        CHECK(bits(a->means, b->means));
+        CHECK(bits(a->quats, b->quats));
+        CHECK(bits(a->sh, b->sh));
+      }
+      fill_random(g, std::uint32_t(first + 60 * count), -1.0f, 1.0f);
+    }
+  }
+  msgs::Adam<G7> adam({}, 10);
+  Model small(10);
+  CHECK_THROWS_AS(adam.begin_colour(small, 5, 3), std::invalid_argument);
+  Model other(11);
+  CHECK_THROWS_AS(adam.begin_colour(other, 0, 1), std::invalid_argument);
+}

@@ -410,3 +410,25 @@ TEST_CASE("a short joint-optimized run converges on the training views without N
   CHECK(tr.model().size() > 2000);  // densification ran
   CHECK(tr.model().size() < 30000);
 }
+
+TEST_CASE("fused colour step: the same bits as storing the colour gradients, dense and sparse Adam") {
+  // joint-optimized at scale 0.05: SH degree 1, refinements from step 250, the scale regulariser
+  // every 10th step (a dense geometry step), SpecDelay's colour-only steps.
+  for (const bool sparse : {false, true}) {
+    CAPTURE(sparse);
+    TrainOptions fused, stored;
+    fused.sparse = stored.sparse = sparse;
+    stored.fused_colour = false;
+    Trainer<G> a = make_trainer("joint-optimized", 0.05, fused), b = make_trainer("joint-optimized", 0.05, stored);
+    REQUIRE(a.train(0, 330) == 330);
+    REQUIRE(b.train(0, 330) == 330);
+    const Snapshot sa(a), sb(b);
+    CHECK(sa.model.size() != initial_model().size());  // refinements ran
+    CHECK(same(sa.model.sh, sb.model.sh));
+    CHECK(same(sa.m1.sh, sb.m1.sh));
+    CHECK(same(sa.m2.sh, sb.m2.sh));
+    CHECK(geometry_identical(sa.model, sb.model));
+    CHECK(same(sa.m2.means, sb.m2.means));
+    CHECK(sa.steps.sh == sb.steps.sh);
+  }
+}

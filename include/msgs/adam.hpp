@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "msgs/colour_gradient_sink.hpp"
 #include "msgs/gaussian.hpp"
 
 namespace msgs {
@@ -168,6 +169,111 @@ class Adam {
   struct Betas {
     S b1c, b2, b2c, eps;
   };
+
+ public:
+  /// The colour (SH) half of one step, for a backward that hands over each visible Gaussian's
+  /// colour gradient as soon as it is known (Rasterizer::backward with this as its sink): then
+  /// the gradient is never stored and read back, and a row is updated while the backward still
+  /// has it in cache. `begin_colour` advances the channels' step counters; `apply` updates one row
+  /// of one channel from its gradient, what `step` does to a listed row; `finish_colour` then
+  /// updates the rows not listed, as `step` does. Together with `step` under a mask without SH,
+  /// the same bits as one `step`. The step holds pointers into the model and the moments: it is
+  /// valid until either changes size.
+  class ColourStep final : public ColourGradientSink<S> {
+   public:
+    /// The rasteriser's hand-over: `apply` to each lane's row.
+    void consume(const std::uint32_t* ids, int n, std::uint32_t skip, int channel, const S* rows,
+                 std::size_t stride) override {
+      for (int l = 0; l < n; ++l)
+        if (!(skip >> l & 1u)) apply(ids[l], channel, rows + std::size_t(l) * stride);
+    }
+    void prefetch(const std::uint32_t* ids, int n, int first, int count) const override {
+      for (int c = first; c < first + count; ++c)
+        for (int l = 0; l < n; ++l) prefetch(ids[l], c);
+    }
+    /// Update the K coefficients of channel `channel` of Gaussian `row` from their gradient `g`.
+    void apply(std::size_t row, int channel, const S* g) const {
+      const Channel& c = channels_[static_cast<std::size_t>(channel - first_)];
+      const std::size_t o = row * std::size_t(K);
+      update_rows<K>(c.p + o, c.m + o, c.v + o, g, 1, betas_, c.step_size.data(), c.inv.data());
+    }
+    /// Fetch the moments' rows of channel `channel` of Gaussian `row` into the cache.
+    void prefetch(std::size_t row, int channel) const {
+      const Channel& c = channels_[static_cast<std::size_t>(channel - first_)];
+      const std::size_t o = row * std::size_t(K);
+      for (const S* a : {c.m + o, c.v + o}) {
+        __builtin_prefetch(a, 1);
+        __builtin_prefetch(a + K - 1, 1);
+      }
+    }
+    int first() const { return first_; }
+    int count() const { return count_; }
+
+   private:
+    friend class Adam;
+    static constexpr int K = G::sh_coeffs;
+    struct Channel {
+      S* p = nullptr;
+      S* m = nullptr;
+      S* v = nullptr;
+      std::array<S, K> step_size{}, inv{};  // per coefficient: the DC coefficient has its own lr
+    };
+    std::array<Channel, G::bands> channels_{};
+    int first_ = 0, count_ = 0;
+    std::size_t rows_ = 0;
+    Betas betas_{};
+  };
+
+  /// Start the colour half of a step on channels [first, first + count) of `params` (advances
+  /// their step counters). Call `step` (with mask.sh = false) for the geometry as usual.
+  ColourStep begin_colour(GaussianModel<G, S>& params, int first, int count) {
+    if (first < 0 || count < 0 || first + count > G::bands)
+      throw std::invalid_argument("Adam::begin_colour: channel range [" + std::to_string(first) + ", " +
+                                  std::to_string(first + count) + ") is outside [0, " + std::to_string(G::bands) + ")");
+    params.check_consistent();
+    if (exp_avg.size() != params.size() || exp_avg_sq.size() != params.size())
+      throw std::invalid_argument("Adam::begin_colour: the moments hold " + std::to_string(exp_avg.size()) +
+                                  " Gaussians, the model " + std::to_string(params.size()) +
+                                  " (densification must resize the optimiser state with the model)");
+    ColourStep cs;
+    cs.first_ = first;
+    cs.count_ = count;
+    cs.rows_ = params.size();
+    cs.betas_ = betas();
+    const std::size_t stride = params.sh_plane_stride();
+    for (int c = first; c < first + count; ++c) {
+      const std::int64_t t = ++steps.sh[static_cast<std::size_t>(c)];
+      const Coeffs dc = coeffs(config.lr_sh_dc, t), rest = coeffs(config.lr_sh_rest, t);
+      auto& ch = cs.channels_[static_cast<std::size_t>(c - first)];
+      ch.step_size.fill(rest.step_size);
+      ch.inv.fill(rest.inv_bc2_sqrt);
+      ch.step_size[0] = dc.step_size;
+      ch.inv[0] = dc.inv_bc2_sqrt;
+      const std::size_t off = std::size_t(c) * stride;
+      ch.p = params.sh.data() + off;
+      ch.m = exp_avg.sh.data() + off;
+      ch.v = exp_avg_sq.sh.data() + off;
+    }
+    return cs;
+  }
+
+  /// Finish the colour half: the rows not in `rows` (ascending) take the update of a zero
+  /// gradient (Unlisted::zero_gradient, dense Adam) or stay as they are (Unlisted::untouched).
+  /// Every row in `rows` must have been `apply`d, once per channel.
+  void finish_colour(const ColourStep& cs, const std::vector<std::uint32_t>& rows, Unlisted unlisted) const {
+    if (unlisted == Unlisted::untouched) return;
+    constexpr int K = G::sh_coeffs;
+    for (int i = 0; i < cs.count_; ++i) {
+      const auto& ch = cs.channels_[static_cast<std::size_t>(i)];
+      for_each_run(cs.rows_, &rows, unlisted, [&](std::size_t row, std::size_t n, bool listed) {
+        if (listed) return;
+        const std::size_t o = row * K;
+        update_rows<K, true>(ch.p + o, ch.m + o, ch.v + o, nullptr, n, cs.betas_, ch.step_size.data(), ch.inv.data());
+      });
+    }
+  }
+
+ private:
   Betas betas() const {
     return {static_cast<S>(1.0 - config.beta1), static_cast<S>(config.beta2), static_cast<S>(1.0 - config.beta2),
             static_cast<S>(config.eps)};
@@ -283,29 +389,19 @@ class Adam {
   }
 
   /// SH of channels [first, first + count): one band plane at a time, the DC coefficient with its
-  /// own learning rate.
+  /// own learning rate (the coefficients of ColourStep).
   void update_sh(GaussianModel<G, S>& params, const GaussianModel<G, S>& grad, int first, int count,
                  const std::vector<std::uint32_t>* rows, Unlisted unlisted) {
     constexpr int K = G::sh_coeffs;
-    const Betas b = betas();
+    const ColourStep cs = begin_colour(params, first, count);
     const std::size_t stride = params.sh_plane_stride();
-    for (int c = first; c < first + count; ++c) {
-      const std::int64_t t = ++steps.sh[static_cast<std::size_t>(c)];
-      const Coeffs dc = coeffs(config.lr_sh_dc, t), rest = coeffs(config.lr_sh_rest, t);
-      std::array<S, K> step_size, inv;
-      step_size.fill(rest.step_size);
-      inv.fill(rest.inv_bc2_sqrt);
-      step_size[0] = dc.step_size;
-      inv[0] = dc.inv_bc2_sqrt;
-      const std::size_t off = std::size_t(c) * stride;
-      S* p = params.sh.data() + off;
-      const S* g = grad.sh.data() + off;
-      S* m = exp_avg.sh.data() + off;
-      S* v = exp_avg_sq.sh.data() + off;
+    for (int i = 0; i < count; ++i) {
+      const auto& ch = cs.channels_[static_cast<std::size_t>(i)];
+      const S* g = grad.sh.data() + std::size_t(first + i) * stride;
       for_each_run(params.size(), rows, unlisted, [&](std::size_t row, std::size_t n, bool listed) {
         const std::size_t o = row * K;
-        if (listed) update_rows<K>(p + o, m + o, v + o, g + o, n, b, step_size.data(), inv.data());
-        else update_rows<K, true>(p + o, m + o, v + o, nullptr, n, b, step_size.data(), inv.data());
+        if (listed) update_rows<K>(ch.p + o, ch.m + o, ch.v + o, g + o, n, cs.betas_, ch.step_size.data(), ch.inv.data());
+        else update_rows<K, true>(ch.p + o, ch.m + o, ch.v + o, nullptr, n, cs.betas_, ch.step_size.data(), ch.inv.data());
       });
     }
   }

@@ -16,6 +16,7 @@
 #include "bin.hpp"
 #include "blend.hpp"
 #include "camera.hpp"
+#include "colour_gradient_sink.hpp"
 #include "gaussian.hpp"
 #include "image.hpp"
 #include "project.hpp"
@@ -126,8 +127,13 @@ class Rasterizer {
   /// written (every geometry value, mean2d, absgrad, and all K coefficients of the rendered
   /// channels); other rows keep whatever they held: the work is proportional to what the view saw,
   /// and the caller reads those rows only (sparse Adam, density statistics over `visible()`).
+  ///
+  /// `colour`: when given, the colour gradients of the visible Gaussians go to it instead of
+  /// `grads.model.sh`, which is then not written at all (whatever `fill`). The model's colour rows
+  /// of a Gaussian are read only while its own gradient is computed, before they are handed over,
+  /// so the sink may update the model's rows it is given.
   void backward(const Image<S>& d_image, const Image<S>* d_alpha, const Image<S>* d_depth, Gradients<G, S>& grads,
-                GradientFill fill = GradientFill::dense) {
+                GradientFill fill = GradientFill::dense, ColourGradientSink<S>* colour = nullptr) {
     if (!has_forward_) throw std::logic_error("Rasterizer::backward: no forward pass to differentiate");
     check_grad_image(d_image, count_, "d_image");
     if (d_alpha) check_grad_image(*d_alpha, 1, "d_alpha");
@@ -143,7 +149,7 @@ class Rasterizer {
     grads.mean2d.resize(2 * N);
     if constexpr (Opt.absgrad) grads.absgrad.resize(2 * N);
     else grads.absgrad.clear();
-    if (fill == GradientFill::dense) zero_unseen(grads);
+    if (fill == GradientFill::dense) zero_unseen(grads, /*colour=*/colour == nullptr);
 
     // Blend backward: one gradient record per intersection, per-tile background partials.
     using Rec = BlendRec;
@@ -198,6 +204,7 @@ class Rasterizer {
         __builtin_prefetch(&model.log_scales[3 * g]);
         __builtin_prefetch(&model.quats[4 * g]);
       }
+      if (colour) colour->prefetch(ids, n, first, count);
       double acc[L][Rec::size(kBands)] = {};  // lanes past n stay zero
       for (int l = 0; l < n; ++l) {
         const std::size_t v = std::size_t(v0 + l);
@@ -212,10 +219,10 @@ class Rasterizer {
           for (int k = 0; k < R; ++k) acc[l][k] += double(rec[k]);
         }
       }
-      const std::uint32_t hard = backward_batch<D>(model, ids, n, acc, grads);
+      const std::uint32_t hard = backward_batch<D>(model, ids, n, acc, grads, colour);
       if constexpr (Opt.single_precision)
         for (int l = 0; l < n; ++l)
-          if (hard >> l & 1u) backward_batch<double>(model, &ids[l], 1, &acc[l], grads);
+          if (hard >> l & 1u) backward_batch<double>(model, &ids[l], 1, &acc[l], grads, colour);
     }
     const auto t2 = clock::now();
     timings_.blend_backward += std::chrono::duration<double>(t1 - t0).count();
@@ -262,11 +269,13 @@ class Rasterizer {
   }
 
   /// Projection and colour backward of the visible Gaussians ids[0 .. n) (lanes past n repeat
-  /// ids[0]), from their reduced records acc[l]: writes their rows of `grads`. Returns the lanes
-  /// handed to double precision (bits; their rows are not written).
+  /// ids[0]), from their reduced records acc[l]: writes their rows of `grads`, the colour ones to
+  /// `colour` when given. Returns the lanes handed to double precision (bits; their rows are not
+  /// written).
   template <class D>
   std::uint32_t backward_batch(const Model& model, const std::uint32_t* ids, int n,
-                               const double (*acc)[BlendRec::size(kBands)], Gradients<G, S>& grads) const {
+                               const double (*acc)[BlendRec::size(kBands)], Gradients<G, S>& grads,
+                               ColourGradientSink<S>* colour) const {
     using Rec = BlendRec;
     using LD = detail::Lanes<D>;
     using T = typename LD::T;
@@ -302,7 +311,15 @@ class Rasterizer {
       detail::colour_bwd_lanes<D>(
           count, deg, raw, [&](int ch, int k) { return cf.load(ch, k); }, v_colour,
           [&](int ch, int k, const D& v) { v_sh.store(ch, k, v); }, gg.mean);
-      v_sh.scatter(grads.model, ids, n, hard, first, count, K);  // coefficients above the active degree: zero
+      if (colour) {
+        alignas(64) S rows[ShLanes<D>::L][G::sh_coeffs];
+        for (int ch = 0; ch < count; ++ch) {
+          v_sh.rows(ch, K, rows);
+          colour->consume(ids, n, hard, first + ch, &rows[0][0], G::sh_coeffs);
+        }
+      } else {
+        v_sh.scatter(grads.model, ids, n, hard, first, count, K);  // coefficients above the active degree: zero
+      }
     }
     for (int l = 0; l < n; ++l) {
       if (hard >> l & 1u) continue;
@@ -519,8 +536,9 @@ class Rasterizer {
   }
 
   /// Zero every gradient of a culled Gaussian (the reduction writes the visible rows, all
-  /// coefficients of the rendered channels included). In parallel, since it touches every Gaussian.
-  void zero_unseen(Gradients<G, S>& grads) const {
+  /// coefficients of the rendered channels included; the colour ones only with `colour`). In
+  /// parallel, since it touches every Gaussian.
+  void zero_unseen(Gradients<G, S>& grads, bool colour) const {
     const std::int64_t N = std::int64_t(model_->size());
     auto& m = grads.model;
     const int first = first_, last = first_ + count_;
@@ -533,7 +551,8 @@ class Rasterizer {
       m.opacity_logits[i] = S(0);
       grads.mean2d[2 * i] = grads.mean2d[2 * i + 1] = S(0);
       if constexpr (Opt.absgrad) grads.absgrad[2 * i] = grads.absgrad[2 * i + 1] = S(0);
-      for (int ch = first; ch < last; ++ch) std::fill_n(m.sh_row(i, ch), G::sh_coeffs, S(0));
+      if (colour)
+        for (int ch = first; ch < last; ++ch) std::fill_n(m.sh_row(i, ch), G::sh_coeffs, S(0));
     }
   }
 
@@ -586,27 +605,31 @@ class Rasterizer {
 #pragma GCC diagnostic pop
 #endif
     void store(int ch, int k, const D& d) { std::memcpy(v[ch][k], &d, sizeof d); }
+    /// Lane l's coefficients of channel ch as a row, out[l][0 .. G::sh_coeffs), zeros from K on.
+    void rows(int ch, int K, S (*out)[G::sh_coeffs]) const {
+      if constexpr (kBlocks) {
+        for (int k0 = 0; k0 < G::sh_coeffs; k0 += L) {
+          D r[L];
+          for (int k = 0; k < L; ++k) r[k] = k0 + k < K ? load(ch, k0 + k) : D{};
+          detail::transpose_square(r);
+          for (int l = 0; l < L; ++l) std::memcpy(out[l] + k0, &r[l], sizeof(D));
+        }
+      } else {
+        for (int l = 0; l < L; ++l) {
+          for (int k = 0; k < K; ++k) out[l][k] = S(v[ch][k][l]);
+          for (int k = K; k < G::sh_coeffs; ++k) out[l][k] = S(0);
+        }
+      }
+    }
     /// Write the first n lanes' K coefficients of each channel into `g`, zeros above K; lanes
     /// whose bit is set in `skip` are left out.
     template <class M>
     void scatter(M& g, const std::uint32_t* ids, int n, std::uint32_t skip, int first, int count, int K) const {
-      if constexpr (kBlocks) {
-        for (int ch = 0; ch < count; ++ch)
-          for (int k0 = 0; k0 < G::sh_coeffs; k0 += L) {
-            D r[L];
-            for (int k = 0; k < L; ++k) r[k] = k0 + k < K ? load(ch, k0 + k) : D{};
-            detail::transpose_square(r);
-            for (int l = 0; l < L && l < n; ++l)  // n <= L; the first bound lets GCC see it
-              if (!(skip >> l & 1u)) std::memcpy(g.sh_row(ids[l], first + ch) + k0, &r[l], sizeof(D));
-          }
-      } else {
-        for (int ch = 0; ch < count; ++ch)
-          for (int l = 0; l < n; ++l) {
-            if (skip >> l & 1u) continue;
-            S* row = g.sh_row(ids[l], first + ch);
-            for (int k = 0; k < K; ++k) row[k] = S(v[ch][k][l]);
-            for (int k = K; k < G::sh_coeffs; ++k) row[k] = S(0);
-          }
+      alignas(64) S out[L][G::sh_coeffs];
+      for (int ch = 0; ch < count; ++ch) {
+        rows(ch, K, out);
+        for (int l = 0; l < L && l < n; ++l)  // n <= L; the first bound lets GCC see it
+          if (!(skip >> l & 1u)) std::memcpy(g.sh_row(ids[l], first + ch), out[l], sizeof out[l]);
       }
     }
   };

@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <functional>
 #include <map>
+#include <optional>
 #include <span>
 #include <stdexcept>
 #include <string>
@@ -141,6 +142,11 @@ struct TrainOptions {
   /// scale regulariser only for the Gaussians the view saw; the others and their Adam moments stay
   /// as they are. Cheaper per step, but a different optimisation (README: "Sparse Adam").
   bool sparse = false;
+  /// Adam's colour (SH) update of each Gaussian the view saw runs inside the backward, as soon as
+  /// its colour gradient is known (Adam::ColourStep): the gradient is never stored and read back and
+  /// the row is still in cache. The same bits as false, which stores the colour gradients and
+  /// updates after the backward (check_finite, which reads them, implies false).
+  bool fused_colour = true;
   /// Where train() writes checkpoints (empty: none): every `checkpoint_every` steps, at the end,
   /// and when stopped early, so an interrupted run always leaves a usable checkpoint.
   std::filesystem::path checkpoint_path;
@@ -453,7 +459,23 @@ class Trainer {
       const bool reg_step = opt_.scale_reg_every > 0 && step % opt_.scale_reg_every == 0;
       const bool seen_only = opt_.sparse || !reg_step;
       const std::vector<std::uint32_t>* rows = seen_only ? &seen : nullptr;
-      raster.backward(d_image, nullptr, nullptr, grads, seen_only ? GradientFill::visible : GradientFill::dense);
+      const Unlisted unlisted = opt_.sparse ? Unlisted::untouched : Unlisted::zero_gradient;
+      // The strategy's masks (they depend on the step and band only).
+      StepContext ctx;
+      ctx.step = step;
+      ctx.band = bi;
+      ctx.spectral = band.spectral;
+      ctx.mask = AdamMask::band(band.first_channel, band.channels);
+      hooks_.pre_backward(plan_, ctx);
+      // Adam's colour update of the visible Gaussians inside the backward (fused_colour).
+      const bool fuse = opt_.fused_colour && !opt_.check_finite && ctx.mask.sh;
+      std::optional<typename Adam<G, float>::ColourStep> colour;
+      if (fuse) {
+        const int first = ctx.mask.sh_first, count = ctx.mask.sh_count < 0 ? G::bands - first : ctx.mask.sh_count;
+        colour.emplace(adam_.begin_colour(model_, first, count));
+      }
+      raster.backward(d_image, nullptr, nullptr, grads, seen_only ? GradientFill::visible : GradientFill::dense,
+                      fuse ? &*colour : nullptr);
       if (opt_.check_finite) check_finite_gradients(step, grads, rows);
       if (reg_step)
         scale_reg<float>(std::span<const float>(model_.log_scales), std::span<float>(grads.model.log_scales),
@@ -467,14 +489,11 @@ class Trainer {
       times_.backward_blend += raster.timings().blend_backward;
       times_.backward_gaussians += raster.timings().project_backward;
 
-      // 5. The strategy's masks, then Adam.
-      StepContext ctx;
-      ctx.step = step;
-      ctx.band = bi;
-      ctx.spectral = band.spectral;
-      ctx.mask = AdamMask::band(band.first_channel, band.channels);
-      hooks_.pre_backward(plan_, ctx);
-      adam_.step(model_, grads.model, ctx.mask, rows, opt_.sparse ? Unlisted::untouched : Unlisted::zero_gradient);
+      // 5. Adam with the strategy's masks (the colour of the visible Gaussians already, when fused).
+      AdamMask mask = ctx.mask;
+      if (fuse) mask.sh = false;
+      adam_.step(model_, grads.model, mask, rows, unlisted);
+      if (fuse) adam_.finish_colour(*colour, seen, unlisted);
       auto t5 = clock::now();
       times_.adam += seconds(t4, t5);
 
