@@ -27,6 +27,15 @@ double ulps_f(float a, double ref) {
   return std::abs(double(a) - ref) / ulp;
 }
 
+/// Channels 1 and 2 of a three-channel model at SH degree `deg`.
+RenderSettings<float> middle_channels(int deg) {
+  RenderSettings<float> rs;
+  rs.band_first = 1;
+  rs.band_count = 2;
+  rs.sh_degree = deg;
+  return rs;
+}
+
 /// Random Gaussians in front of `c` (some off screen), none of them hard.
 std::vector<GaussianGeometry> tame_geometries(std::uint64_t seed, int n) {
   std::mt19937_64 rng(seed);
@@ -329,10 +338,7 @@ TEST_CASE("single-precision colour rows move as transposed blocks at every SH de
   const GaussianModel<G, float> m = random_scene<G, float>(cam, sp, 9);
   for (int deg = 0; deg <= 3; ++deg) {
     CAPTURE(deg);
-    RenderSettings<float> rs;
-    rs.band_first = 1;
-    rs.band_count = 2;
-    rs.sh_degree = deg;
+    const RenderSettings<float> rs = middle_channels(deg);
     Rasterizer<G, float, kSingleAA> rs_single;
     Rasterizer<G, float, kDoubleAA> rs_double;
     rs_single.forward(m, cam, rs);
@@ -396,12 +402,8 @@ TEST_CASE("a colour sink gets the colour gradients the backward would store, onc
   for (const int deg : {1, 3})
     for (const GradientFill fill : {GradientFill::dense, GradientFill::visible}) {
       CAPTURE(deg);
-      RenderSettings<float> rs;
-      rs.band_first = 1;
-      rs.band_count = 2;
-      rs.sh_degree = deg;
       Rasterizer<G, float, kSingleAA> r;
-      r.forward(m, cam, rs);
+      r.forward(m, cam, middle_channels(deg));
       Image<float> wi(cam.width, cam.height, 2);
       std::mt19937_64 rng(7);
       std::uniform_real_distribution<float> u(-1.0f, 1.0f);
