@@ -206,8 +206,6 @@ class Adam {
         __builtin_prefetch(a + K - 1, 1);
       }
     }
-    int first() const { return first_; }
-    int count() const { return count_; }
 
    private:
     friend class Adam;

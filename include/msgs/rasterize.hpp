@@ -149,7 +149,7 @@ class Rasterizer {
     grads.mean2d.resize(2 * N);
     if constexpr (Opt.absgrad) grads.absgrad.resize(2 * N);
     else grads.absgrad.clear();
-    if (fill == GradientFill::dense) zero_unseen(grads, /*colour=*/colour == nullptr);
+    if (fill == GradientFill::dense) zero_unseen(grads, /*zero_colour=*/colour == nullptr);
 
     // Blend backward: one gradient record per intersection, per-tile background partials.
     using Rec = BlendRec;
@@ -536,9 +536,9 @@ class Rasterizer {
   }
 
   /// Zero every gradient of a culled Gaussian (the reduction writes the visible rows, all
-  /// coefficients of the rendered channels included; the colour ones only with `colour`). In
+  /// coefficients of the rendered channels included), the colour rows with `zero_colour`. In
   /// parallel, since it touches every Gaussian.
-  void zero_unseen(Gradients<G, S>& grads, bool colour) const {
+  void zero_unseen(Gradients<G, S>& grads, bool zero_colour) const {
     const std::int64_t N = std::int64_t(model_->size());
     auto& m = grads.model;
     const int first = first_, last = first_ + count_;
@@ -551,7 +551,7 @@ class Rasterizer {
       m.opacity_logits[i] = S(0);
       grads.mean2d[2 * i] = grads.mean2d[2 * i + 1] = S(0);
       if constexpr (Opt.absgrad) grads.absgrad[2 * i] = grads.absgrad[2 * i + 1] = S(0);
-      if (colour)
+      if (zero_colour)
         for (int ch = first; ch < last; ++ch) std::fill_n(m.sh_row(i, ch), G::sh_coeffs, S(0));
     }
   }
