@@ -44,6 +44,9 @@ struct AdamMask {
   int sh_first = 0;   ///< first colour channel whose SH updates
   int sh_count = -1;  ///< number of channels; -1 means all channels from sh_first on
 
+  /// The number of SH channels the mask updates in a model of `bands` channels (sh_count resolved).
+  int sh_channels(int bands) const { return sh_count < 0 ? bands - sh_first : sh_count; }
+
   /// Everything, all channels.
   static AdamMask all() { return {}; }
   /// Colour (SH) of channels [first, first + count) only; geometry and opacity frozen.
@@ -134,7 +137,7 @@ class Adam {
   void step(GaussianModel<G, S>& params, const GaussianModel<G, S>& grad, const AdamMask& mask = {},
             const std::vector<std::uint32_t>* rows = nullptr, Unlisted unlisted = Unlisted::untouched) {
     check_sizes(params, grad);
-    int first = mask.sh_first, count = mask.sh_count < 0 ? G::bands - mask.sh_first : mask.sh_count;
+    const int first = mask.sh_first, count = mask.sh_channels(G::bands);
     if (mask.sh && (first < 0 || count < 0 || first + count > G::bands))
       throw std::invalid_argument("Adam::step: mask SH channel range [" + std::to_string(first) + ", " +
                                   std::to_string(first + count) + ") is outside [0, " + std::to_string(G::bands) +

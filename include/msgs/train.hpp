@@ -470,10 +470,7 @@ class Trainer {
       // Adam's colour update of the visible Gaussians inside the backward (fused_colour).
       const bool fuse = opt_.fused_colour && !opt_.check_finite && ctx.mask.sh;
       std::optional<typename Adam<G, float>::ColourStep> colour;
-      if (fuse) {
-        const int first = ctx.mask.sh_first, count = ctx.mask.sh_count < 0 ? G::bands - first : ctx.mask.sh_count;
-        colour.emplace(adam_.begin_colour(model_, first, count));
-      }
+      if (fuse) colour.emplace(adam_.begin_colour(model_, ctx.mask.sh_first, ctx.mask.sh_channels(G::bands)));
       raster.backward(d_image, nullptr, nullptr, grads, seen_only ? GradientFill::visible : GradientFill::dense,
                       fuse ? &*colour : nullptr);
       if (opt_.check_finite) check_finite_gradients(step, grads, rows);
