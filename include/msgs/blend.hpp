@@ -10,6 +10,7 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 
 #include "bin.hpp"
 #include "detail/block_simd.hpp"
@@ -99,6 +100,30 @@ struct BlockRange {
     return columns * std::uint32_t(rows);
   }
 };
+
+/// The rows of a tile's blocks that lie in the image, for moving a block's 16 elements (contiguous
+/// in element order, TileBlocks::element) to and from row-major images: block row r of a block is
+/// elements 4 r .. 4 r + 3, one run of `n` consecutive pixels of image row `y`. Called as
+/// f(block, r, first pixel of the run in the image, n), blocks in order, rows in order.
+template <class TB, class F>
+inline void for_each_block_row(const TB& tb, int width, F&& f) {
+  constexpr int B = TileBlocks::kSide;
+  for (int b = 0; b < TileBlocks::kCount; ++b) {
+    const int x0 = B * (b % TileBlocks::kPerSide), y0 = B * (b / TileBlocks::kPerSide);
+    if (x0 >= tb.w || y0 >= tb.h) continue;
+    const int n = std::min(B, tb.w - x0), rows = std::min(B, tb.h - y0);
+    for (int r = 0; r < rows; ++r)
+      f(b, r, std::size_t(tb.y0 + y0 + r) * std::size_t(width) + std::size_t(tb.x0 + x0), n);
+  }
+}
+
+/// Copies the `n` (<= 4) elements of a block row; a whole row (the common case) as one fixed-size
+/// copy.
+template <class T>
+inline void copy_block_row(T* dst, const T* src, int n) {
+  if (n == TileBlocks::kSide) std::memcpy(dst, src, sizeof(T) * TileBlocks::kSide);
+  else std::memcpy(dst, src, sizeof(T) * std::size_t(n));
+}
 
 /// The pixel centres of one tile's blocks: x[bx][h] holds the x of the lanes of chunk h in block
 /// column bx, y[by][h] the y in block row by (exact in S). Set up once per tile.
@@ -370,18 +395,31 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
     out.block_mask[j] = std::uint16_t(blocks_blended);
   }
   for (; j < end; ++j) out.block_mask[j] = 0;  // entries after every pixel stopped
-  const int W = in.grid->width;
-  for (int y = 0; y < tb.h; ++y)
-    for (int x = 0; x < tb.w; ++x) {
-      const int k = TBk::element(x, y), q = TBk::block(x, y) * NH + k / L, i = k % L;
-      const std::size_t pix = std::size_t(tb.y0 + y) * std::size_t(W) + std::size_t(tb.x0 + x);
-      const S t = std::abs(T[q][i]);
-      for (int ch = 0; ch < nc; ++ch) out.image[pix * std::size_t(nc) + std::size_t(ch)] = acc[ch][q][i] + t * in.background[ch];
-      out.alpha[pix] = S(1) - t;
-      if constexpr (Depth) out.depth[pix] = dacc[q][i];
-      out.transmittance[pix] = t;
-      out.last[pix] = last[q][i];
+  // The outputs, computed a vector at a time in block order and written a block row (4 pixels) at
+  // a time: T and the colours become |T|, 1 - |T| and acc + |T| background in place.
+  V bg[NC];
+  for (int ch = 0; ch < NC; ++ch) detail::broadcast(bg[ch], ch < nc ? in.background[ch] : S(0));
+  V alpha_out[Q];
+  for (int q = 0; q < Q; ++q) {
+    detail::abs_into(T[q], T[q]);
+    alpha_out[q] = one - T[q];
+    for (int ch = 0; ch < NC; ++ch) acc[ch][q] = acc[ch][q] + T[q] * bg[ch];
+  }
+  const auto elements = [](const auto* blocks, int b, int r) {
+    using E = std::remove_cvref_t<decltype(blocks[0][0])>;
+    return reinterpret_cast<const E*>(blocks + b * NH) + TBk::kSide * r;
+  };
+  detail::for_each_block_row(tb, in.grid->width, [&](int b, int r, std::size_t pix, int n) {
+    detail::copy_block_row(out.transmittance + pix, elements(T, b, r), n);
+    detail::copy_block_row(out.alpha + pix, elements(alpha_out, b, r), n);
+    detail::copy_block_row(out.last + pix, elements(last, b, r), n);
+    if constexpr (Depth) detail::copy_block_row(out.depth + pix, elements(dacc, b, r), n);
+    S* img = out.image + pix * std::size_t(nc);
+    for (int i = 0; i < n; ++i) {
+      const int k = TBk::kSide * r + i, q = b * NH + k / L;
+      for (int ch = 0; ch < nc; ++ch) img[i * nc + ch] = acc[ch][q][k % L];
     }
+  });
   return fragments;
 }
 
@@ -420,35 +458,58 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
   detail::broadcast(min_alpha, K::kMinAlpha);
   detail::block_lane_offsets<S>(lx, ly);
   const detail::TileCentres<S> centres(lx, ly, tb.x0, tb.y0);
-  std::uint32_t max_last = 0;
-  S bg_grad[NC] = {};
+  // Per-pixel state in block order, read a block row (4 pixels) at a time; lanes outside the image
+  // hold T = 1 and zero gradients, so that they take no part.
+  V d_alpha[Q];
+  U zero_u;
+  detail::broadcast(zero_u, 0u);
+  for (int q = 0; q < Q; ++q) {
+    T[q] = one;
+    B[q] = zero;
+    last[q] = zero_u;
+    d_alpha[q] = zero;
+    for (int ch = 0; ch < NC; ++ch) dimg[ch][q] = zero;
+    if constexpr (Depth) dD[q] = zero;
+  }
+  const auto elements = [](auto* blocks, int b, int r) {
+    using E = std::remove_cvref_t<decltype(blocks[0][0])>;
+    return reinterpret_cast<E*>(blocks + b * NH) + TBk::kSide * r;
+  };
   const int W = in.grid->width;
-  constexpr int TS = TileGrid::kTileSize;
-  for (int y = 0; y < TS; ++y)
-    for (int x = 0; x < TS; ++x) {
-      const int k = TBk::element(x, y), q = TBk::block(x, y) * NH + k / L, i = k % L;
-      const bool valid = x < tb.w && y < tb.h;
-      const std::size_t pix = valid ? std::size_t(tb.y0 + y) * std::size_t(W) + std::size_t(tb.x0 + x) : 0;
-      const S t = valid ? transmittance[pix] : S(1);
-      T[q][i] = t;
-      B[q][i] = S(0);
-      last[q][i] = valid ? last_in[pix] : 0;
-      max_last = std::max(max_last, last[q][i]);
-      S bg_dot = S(0);
-      for (int ch = 0; ch < NC; ++ch) {
-        const S d = (valid && ch < nc) ? gin.d_image[pix * std::size_t(nc) + std::size_t(ch)] : S(0);
-        dimg[ch][q][i] = d;
-        if (ch < nc) {
-          bg_dot += in.background[ch] * d;
-          bg_grad[ch] += t * d;
-        }
-      }
-      const S da = (valid && gin.d_alpha) ? gin.d_alpha[pix] : S(0);
-      // d(1 - T_final)/d alpha_i and d(T_final bg)/d alpha_i both scale with T_final / (1 - alpha_i).
-      t_final_terms[q][i] = valid ? t * (da - bg_dot) : S(0);
-      if constexpr (Depth) dD[q][i] = (valid && gin.d_depth) ? gin.d_depth[pix] : S(0);
+  detail::for_each_block_row(tb, W, [&](int b, int r, std::size_t pix, int n) {
+    detail::copy_block_row(elements(T, b, r), transmittance + pix, n);
+    detail::copy_block_row(elements(last, b, r), last_in + pix, n);
+    if (gin.d_alpha) detail::copy_block_row(elements(d_alpha, b, r), gin.d_alpha + pix, n);
+    if constexpr (Depth)
+      if (gin.d_depth) detail::copy_block_row(elements(dD, b, r), gin.d_depth + pix, n);
+    const S* d = gin.d_image + pix * std::size_t(nc);
+    for (int i = 0; i < n; ++i) {
+      const int k = TBk::kSide * r + i, q = b * NH + k / L;
+      for (int ch = 0; ch < nc; ++ch) dimg[ch][q][k % L] = d[i * nc + ch];
     }
-  for (int ch = 0; ch < nc; ++ch) d_background[ch] += bg_grad[ch];
+  });
+  U max_lane = last[0];
+  for (int q = 1; q < Q; ++q) max_lane = max_lane > last[q] ? max_lane : last[q];
+  std::uint32_t max_last = 0;
+  for (int i = 0; i < L; ++i) max_last = std::max(max_last, max_lane[i]);
+  V bg[NC];
+  for (int ch = 0; ch < NC; ++ch) detail::broadcast(bg[ch], ch < nc ? in.background[ch] : S(0));
+  for (int q = 0; q < Q; ++q) {
+    V bg_dot = zero;
+    for (int ch = 0; ch < NC; ++ch) bg_dot = bg_dot + bg[ch] * dimg[ch][q];
+    // d(1 - T_final)/d alpha_i and d(T_final bg)/d alpha_i both scale with T_final / (1 - alpha_i).
+    t_final_terms[q] = T[q] * (d_alpha[q] - bg_dot);
+  }
+  // The background's gradient sum(T_final dL/dimage), in row-major pixel order.
+  for (int ch = 0; ch < nc; ++ch) {
+    S bg_grad = S(0);
+    for (int y = 0; y < tb.h; ++y) {
+      const std::size_t row = std::size_t(tb.y0 + y) * std::size_t(W) + std::size_t(tb.x0);
+      for (int x = 0; x < tb.w; ++x)
+        bg_grad += transmittance[row + std::size_t(x)] * gin.d_image[(row + std::size_t(x)) * std::size_t(nc) + std::size_t(ch)];
+    }
+    d_background[ch] += bg_grad;
+  }
   if (begin == end) return;  // an empty tile still passes its background gradient (T = 1)
 
   // Lane accumulators of one splat, summed over the blocks it blended into. With u = -dL/dsigma
