@@ -272,6 +272,25 @@ TEST_CASE("PSNR: known values, per channel, identical images finite") {
   CHECK(std::isfinite(msgs::psnr_per_channel(a, a)[1]));
 }
 
+TEST_CASE("photometric loss reports the MSE of psnr, and the same loss and gradient with it") {
+  // 23 x 3 = 69 values a row: the 4-way partial sums end on a remainder.
+  const auto x = random_image<float>(23, 19, 3, 41);
+  const auto y = random_image<float>(23, 19, 3, 42);
+  msgs::SsimWorkspace<float> ws;
+  Image<float> g0, g1;
+  const double l0 = msgs::photometric_loss(x, y, &g0, ws);
+  double mse = -1;
+  const double l1 = msgs::photometric_loss(x, y, &g1, ws, {}, &mse);
+  CHECK(l1 == l0);
+  CHECK(g1.data == g0.data);
+  CHECK(msgs::psnr_from_mse(mse) == doctest::Approx(msgs::psnr(x, y)).epsilon(1e-12));
+  CHECK(msgs::psnr_from_mse(0.0) == doctest::Approx(100.0));
+  mse = -1;
+  const Image<float> empty(0, 0, 3);
+  CHECK(msgs::photometric_loss(empty, empty, static_cast<Image<float>*>(nullptr), ws, {}, &mse) == 0.0);
+  CHECK(mse == 0.0);
+}
+
 TEST_CASE("scale regulariser: value, finite differences, ties, runaway scales") {
   std::mt19937 rng(3);
   std::uniform_real_distribution<double> u(-4.0, 1.0);

@@ -445,9 +445,11 @@ struct PhotometricLossConfig {
 /// Value of the photometric loss and, when `grad_render` is non-null, its gradient with respect to
 /// `render` (overwritten, resized to the render's shape). L1 is the mean absolute difference over
 /// pixels and channels; its derivative at a tie is 0 (as torch.sign). `ws` is scratch space.
+/// `mse` (optional) receives the mean squared difference over pixels and channels, summed in the
+/// same pass as L1 (a training step's PSNR, psnr_from_mse, without a serial pass of its own).
 template <class S>
 double photometric_loss(const Image<S>& render, const Image<S>& gt, Image<S>* grad_render, SsimWorkspace<S>& ws,
-                        const PhotometricLossConfig& cfg = {}) {
+                        const PhotometricLossConfig& cfg = {}, double* mse = nullptr) {
   detail::check_image("photometric_loss", "render", render);
   detail::check_image("photometric_loss", "gt", gt);
   detail::check_same_shape("photometric_loss", render.width, render.height, render.channels, gt.width, gt.height,
@@ -456,6 +458,7 @@ double photometric_loss(const Image<S>& render, const Image<S>& gt, Image<S>* gr
   const double ssim_value = ssim_fwd(render, gt, ws, want_grad, nullptr, cfg.ssim_border);
   if (render.data.empty()) {
     if (want_grad) grad_render->reset(render.width, render.height, render.channels);
+    if (mse) *mse = 0.0;
     return 0.0;
   }
   const double lambda = cfg.ssim_weight;
@@ -466,7 +469,7 @@ double photometric_loss(const Image<S>& render, const Image<S>& gt, Image<S>* gr
                     grad_render->channels != render.channels || grad_render->size() != render.size()))
     grad_render->reset(render.width, render.height, render.channels);
   const S l1_scale = static_cast<S>((1.0 - lambda) / static_cast<double>(render.size()));
-  std::vector<double> row_l1(static_cast<std::size_t>(H));
+  std::vector<double> row_l1(static_cast<std::size_t>(H)), row_se(mse ? static_cast<std::size_t>(H) : 0);
 #pragma omp parallel for schedule(static)
   for (int r = 0; r < H; ++r) {
     const std::ptrdiff_t o = r * len;
@@ -482,6 +485,21 @@ double photometric_loss(const Image<S>& render, const Image<S>& gt, Image<S>* gr
     }
     for (; j < len; ++j) a0 += static_cast<double>(std::abs(xr[j] - yr[j]));
     row_l1[static_cast<std::size_t>(r)] = (a0 + a1) + (a2 + a3);
+    if (mse) {
+      double e0 = 0, e1 = 0, e2 = 0, e3 = 0;
+      const auto sq = [&](std::ptrdiff_t i) {
+        const double d = static_cast<double>(xr[i]) - static_cast<double>(yr[i]);
+        return d * d;
+      };
+      for (j = 0; j + 4 <= len; j += 4) {
+        e0 += sq(j);
+        e1 += sq(j + 1);
+        e2 += sq(j + 2);
+        e3 += sq(j + 3);
+      }
+      for (; j < len; ++j) e0 += sq(j);
+      row_se[static_cast<std::size_t>(r)] = (e0 + e1) + (e2 + e3);
+    }
     if (want_grad) {
       S* gr = grad_render->data.data() + o;
       for (std::ptrdiff_t i = 0; i < len; ++i) {
@@ -493,6 +511,11 @@ double photometric_loss(const Image<S>& render, const Image<S>& gt, Image<S>* gr
   double l1 = 0;
   for (double v : row_l1) l1 += v;
   l1 /= static_cast<double>(render.size());
+  if (mse) {
+    double se = 0;
+    for (double v : row_se) se += v;
+    *mse = se / static_cast<double>(render.size());
+  }
   if (want_grad) ssim_bwd(render, gt, ws, static_cast<S>(-lambda), *grad_render);
   return (1.0 - lambda) * l1 + lambda * (1.0 - ssim_value);
 }
@@ -588,6 +611,11 @@ double scale_reg(const GaussianModel<G, S>& model, GaussianModel<G, S>* grad, co
 /// (with max_value 1) instead of inf, which would poison averages over a test set.
 inline constexpr double psnr_min_mse = 1e-10;
 
+/// PSNR in dB of a mean squared error (floored at psnr_min_mse) for signals in [0, max_value].
+inline double psnr_from_mse(double mse, double max_value = 1.0) {
+  return 10.0 * std::log10(max_value * max_value / std::max(mse, psnr_min_mse));
+}
+
 /// PSNR per channel in dB, 10 log10(max_value^2 / MSE_c), for images in [0, max_value].
 template <class S>
 std::vector<double> psnr_per_channel(const Image<S>& a, const Image<S>& b, double max_value = 1.0) {
@@ -604,7 +632,7 @@ std::vector<double> psnr_per_channel(const Image<S>& a, const Image<S>& b, doubl
   std::vector<double> out(C);
   for (std::size_t c = 0; c < C; ++c) {
     const double m = P ? mse[c] / static_cast<double>(P) : 0.0;
-    out[c] = 10.0 * std::log10(max_value * max_value / std::max(m, psnr_min_mse));
+    out[c] = psnr_from_mse(m, max_value);
   }
   return out;
 }
@@ -621,7 +649,7 @@ double psnr(const Image<S>& a, const Image<S>& b, double max_value = 1.0) {
     mse += d * d;
   }
   mse = a.data.empty() ? 0.0 : mse / static_cast<double>(a.data.size());
-  return 10.0 * std::log10(max_value * max_value / std::max(mse, psnr_min_mse));
+  return psnr_from_mse(mse, max_value);
 }
 
 /// Mean SSIM (same window as the training loss) over pixels and channels.

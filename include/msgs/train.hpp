@@ -440,10 +440,11 @@ class Trainer {
       const Image<float>& render = opt_.clamp_render ? clamped : raw;
       if (opt_.exposure) exposure_.forward(frame, render, corrected);
       const Image<float>& seen_image = opt_.exposure ? corrected : render;
-      const double loss = photometric_loss(seen_image, gt, &d_image, ws, opt_.loss);
+      double mse = 0;
+      const double loss = photometric_loss(seen_image, gt, &d_image, ws, opt_.loss, &mse);
       loss_sum += loss;
       ++loss_n;
-      const double p = psnr(seen_image, gt);
+      const double p = psnr_from_mse(mse);
       double& bp = band_psnr_[std::size_t(bi)];
       bp = std::isnan(bp) ? p : 0.9 * bp + 0.1 * p;
       auto t3 = clock::now();
