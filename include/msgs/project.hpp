@@ -14,6 +14,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <type_traits>
 
@@ -850,11 +851,41 @@ inline typename Lanes<D>::M project_bwd_lanes(const GeometryLanes<D>& g, const P
 #pragma GCC diagnostic pop
 #endif
 
+/// Lanes 0 .. L) of `out` [W][L] from the W interleaved values of L consecutive rows at `src`
+/// (src[W l + k] goes to out[k][l]): a loop the vectoriser turns into whole-vector loads and
+/// permutations, where a lane at a time is one insert per value.
+template <int W, int L, class T, class S>
+inline void deinterleave_rows(const S* __restrict src, T (*__restrict out)[L]) {
+  for (int l = 0; l < L; ++l)
+    for (int k = 0; k < W; ++k) out[k][l] = T(src[W * l + k]);
+}
+
 /// The geometry of the Gaussians ids[0 .. Lanes<D>::kCount) of `m` as the lanes of D.
 template <class D, class G, class S>
 inline void gather_geometry(const GaussianModel<G, S>& m, const std::uint32_t* ids, GeometryLanes<D>& g) {
   using T = typename Lanes<D>::T;
-  for (int l = 0; l < Lanes<D>::kCount; ++l) {
+  constexpr int L = Lanes<D>::kCount;
+  if constexpr (L > 1) {
+    // Consecutive rows (the projection of the whole model runs over them in order): whole rows.
+    bool consecutive = true;
+    for (int l = 1; l < L; ++l) consecutive &= ids[l] == ids[0] + std::uint32_t(l);
+    if (consecutive) {
+      const std::size_t i = ids[0];
+      alignas(64) T mean[3][L], log_scale[3][L], quat[4][L], opacity[1][L];
+      deinterleave_rows<3, L>(m.means.data() + 3 * i, mean);
+      deinterleave_rows<3, L>(m.log_scales.data() + 3 * i, log_scale);
+      deinterleave_rows<4, L>(m.quats.data() + 4 * i, quat);
+      deinterleave_rows<1, L>(m.opacity_logits.data() + i, opacity);
+      for (int k = 0; k < 3; ++k) {
+        std::memcpy(&g.mean[k], mean[k], sizeof(D));
+        std::memcpy(&g.log_scale[k], log_scale[k], sizeof(D));
+      }
+      for (int k = 0; k < 4; ++k) std::memcpy(&g.quat[k], quat[k], sizeof(D));
+      std::memcpy(&g.opacity_logit, opacity[0], sizeof(D));
+      return;
+    }
+  }
+  for (int l = 0; l < L; ++l) {
     const std::size_t i = ids[l];
     for (int k = 0; k < 3; ++k) {
       set_lane(g.mean[k], l, T(m.means[3 * i + std::size_t(k)]));
