@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <type_traits>
 
 #include "bin.hpp"
 #include "detail/block_simd.hpp"
@@ -115,6 +116,14 @@ inline void for_each_block_row(const TB& tb, int width, F&& f) {
     for (int r = 0; r < rows; ++r)
       f(b, r, std::size_t(tb.y0 + y0 + r) * std::size_t(width) + std::size_t(tb.x0 + x0), n);
   }
+}
+
+/// The first element of block row r of block b in an array of block vectors ([blocks * NH], NH
+/// vectors a block): the 16 elements of a block are contiguous, block row r is elements 4 r .. 4 r + 3.
+template <int NH, class Vec>
+inline auto* block_row(Vec* blocks, int b, int r) {
+  using E = std::remove_reference_t<decltype(blocks[0][0])>;
+  return reinterpret_cast<E*>(blocks + b * NH) + TileBlocks::kSide * r;
 }
 
 /// Copies the `n` (<= 4) elements of a block row; a whole row (the common case) as one fixed-size
@@ -405,15 +414,11 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
     alpha_out[q] = one - T[q];
     for (int ch = 0; ch < NC; ++ch) acc[ch][q] = acc[ch][q] + T[q] * bg[ch];
   }
-  const auto elements = [](const auto* blocks, int b, int r) {
-    using E = std::remove_cvref_t<decltype(blocks[0][0])>;
-    return reinterpret_cast<const E*>(blocks + b * NH) + TBk::kSide * r;
-  };
   detail::for_each_block_row(tb, in.grid->width, [&](int b, int r, std::size_t pix, int n) {
-    detail::copy_block_row(out.transmittance + pix, elements(T, b, r), n);
-    detail::copy_block_row(out.alpha + pix, elements(alpha_out, b, r), n);
-    detail::copy_block_row(out.last + pix, elements(last, b, r), n);
-    if constexpr (Depth) detail::copy_block_row(out.depth + pix, elements(dacc, b, r), n);
+    detail::copy_block_row(out.transmittance + pix, detail::block_row<NH>(T, b, r), n);
+    detail::copy_block_row(out.alpha + pix, detail::block_row<NH>(alpha_out, b, r), n);
+    detail::copy_block_row(out.last + pix, detail::block_row<NH>(last, b, r), n);
+    if constexpr (Depth) detail::copy_block_row(out.depth + pix, detail::block_row<NH>(dacc, b, r), n);
     S* img = out.image + pix * std::size_t(nc);
     for (int i = 0; i < n; ++i) {
       const int k = TBk::kSide * r + i, q = b * NH + k / L;
@@ -471,17 +476,13 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
     for (int ch = 0; ch < NC; ++ch) dimg[ch][q] = zero;
     if constexpr (Depth) dD[q] = zero;
   }
-  const auto elements = [](auto* blocks, int b, int r) {
-    using E = std::remove_cvref_t<decltype(blocks[0][0])>;
-    return reinterpret_cast<E*>(blocks + b * NH) + TBk::kSide * r;
-  };
   const int W = in.grid->width;
   detail::for_each_block_row(tb, W, [&](int b, int r, std::size_t pix, int n) {
-    detail::copy_block_row(elements(T, b, r), transmittance + pix, n);
-    detail::copy_block_row(elements(last, b, r), last_in + pix, n);
-    if (gin.d_alpha) detail::copy_block_row(elements(d_alpha, b, r), gin.d_alpha + pix, n);
+    detail::copy_block_row(detail::block_row<NH>(T, b, r), transmittance + pix, n);
+    detail::copy_block_row(detail::block_row<NH>(last, b, r), last_in + pix, n);
+    if (gin.d_alpha) detail::copy_block_row(detail::block_row<NH>(d_alpha, b, r), gin.d_alpha + pix, n);
     if constexpr (Depth)
-      if (gin.d_depth) detail::copy_block_row(elements(dD, b, r), gin.d_depth + pix, n);
+      if (gin.d_depth) detail::copy_block_row(detail::block_row<NH>(dD, b, r), gin.d_depth + pix, n);
     const S* d = gin.d_image + pix * std::size_t(nc);
     for (int i = 0; i < n; ++i) {
       const int k = TBk::kSide * r + i, q = b * NH + k / L;
