@@ -332,7 +332,10 @@ class Adam {
     constexpr std::ptrdiff_t kChunk = 2048;
     if (rows && unlisted == Unlisted::zero_gradient) {
       const std::ptrdiff_t chunks = (static_cast<std::ptrdiff_t>(n) + kChunk - 1) / kChunk;
-#pragma omp parallel for schedule(static)
+      // Dynamic: a chunk of listed rows costs little here when the caller skips them
+      // (finish_colour), and visible rows cluster (spatial order), so equal halves of the rows are
+      // not equal work. Every row is independent: the schedule does not change a bit.
+#pragma omp parallel for schedule(dynamic, 1)
       for (std::ptrdiff_t c = 0; c < chunks; ++c) {
         const std::size_t r0 = std::size_t(c * kChunk), r1 = std::min(n, std::size_t((c + 1) * kChunk));
         auto it = std::lower_bound(rows->begin(), rows->end(), std::uint32_t(r0));

@@ -163,11 +163,14 @@ class Rasterizer {
     dispatch_channels([&]<int C>() {
       const BlendInputs<S> in = blend_inputs();
       const int tiles = grid_.count();
-#pragma omp parallel for schedule(dynamic, 2)
-      for (int t = 0; t < tiles; ++t)
+      const int* order = tile_order_.data();
+#pragma omp parallel for schedule(dynamic, 1)
+      for (int i = 0; i < tiles; ++i) {
+        const int t = order[i];
         blend_tile_bwd<S, C, kBands, Opt.depth, Opt.absgrad>(
             in, t, transmittance_.data(), last_.data(), block_mask_.data(), gin, records_.data(),
             bg_partial_.data() + std::size_t(t) * std::size_t(count_));
+      }
     });
     grads.background.assign(std::size_t(count_), S(0));
     for (int t = 0; t < grid_.count(); ++t)
@@ -525,14 +528,29 @@ class Rasterizer {
     out.last = last_.data();
     block_mask_.resize(bins_.pairs());
     out.block_mask = block_mask_.data();
+    order_tiles();
     std::uint64_t frags = 0;
     dispatch_channels([&]<int C>() {
       const BlendInputs<S> in = blend_inputs();
       const int tiles = grid_.count();
-#pragma omp parallel for schedule(dynamic, 2) reduction(+ : frags)
-      for (int t = 0; t < tiles; ++t) frags += blend_tile_fwd<S, C, kBands, Opt.depth>(in, t, out);
+      const int* order = tile_order_.data();
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : frags)
+      for (int i = 0; i < tiles; ++i) frags += blend_tile_fwd<S, C, kBands, Opt.depth>(in, order[i], out);
     });
     fragments_ = frags;
+  }
+
+  /// The order the blend passes take the tiles in: longest list first, so that the tiles taken
+  /// last are short and the threads finish together (a tile's cost grows with its list). Every
+  /// tile writes only its own pixels and records, so the order does not change a bit.
+  void order_tiles() {
+    const int tiles = grid_.count();
+    tile_order_.resize(std::size_t(tiles));
+    for (int t = 0; t < tiles; ++t) tile_order_[std::size_t(t)] = t;
+    const std::uint64_t* off = bins_.tile_offset.data();
+    std::stable_sort(tile_order_.begin(), tile_order_.end(), [off](int a, int b) {
+      return off[a + 1] - off[a] > off[b + 1] - off[b];
+    });
   }
 
   /// Zero every gradient of a culled Gaussian (the reduction writes the visible rows, all
@@ -660,6 +678,7 @@ class Rasterizer {
   std::vector<std::uint32_t> last_;    // [H, W]
   std::vector<std::uint16_t> block_mask_;// [M] tile blocks each intersection blended into
   std::uint64_t fragments_ = 0;
+  std::vector<int> tile_order_;        // [tiles] the blend passes' order (order_tiles)
   std::vector<S> records_;             // [M, BlendRecord<depth, absgrad>::size(count)]
   std::vector<S> bg_partial_;          // [tiles, count]
 };
