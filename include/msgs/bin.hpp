@@ -70,7 +70,14 @@ struct Binning {
   /// Working memory of bin_gaussians, kept between frames so that binning does not allocate (and
   /// page-fault) anew every frame. Not part of the result.
   struct Scratch {
-    std::vector<std::uint64_t> keys, keys2;  // depth keys (radix sort)
+    std::vector<std::uint64_t> keys, keys2;  // depth keys of double depths (radix sort)
+    std::vector<std::uint32_t> keys32, keys32b;  // depth keys of float depths
+    /// The key buffers for depths of type S (detail::DepthKey).
+    template <class S>
+    auto key_buffers() {
+      if constexpr (sizeof(S) == 4) return std::pair<std::vector<std::uint32_t>&, std::vector<std::uint32_t>&>(keys32, keys32b);
+      else return std::pair<std::vector<std::uint64_t>&, std::vector<std::uint64_t>&>(keys, keys2);
+    }
     std::vector<std::uint32_t> pos, pos2;    // positions into the visible ids (radix sort)
     struct TileRect {
       std::int32_t tx0, ty0, tx1, ty1;
@@ -82,15 +89,17 @@ struct Binning {
 
 namespace detail {
 
-/// Order-preserving unsigned key of a positive depth (float or double bit pattern), widened to
-/// 64 bits.
+/// The unsigned integer of a depth's width (32 bits for float, 64 for double).
 template <class S>
-inline std::uint64_t depth_key(S z) {
-  if constexpr (std::is_same_v<S, float>) {
-    std::uint32_t k; std::memcpy(&k, &z, sizeof k); return k;
-  } else {
-    std::uint64_t k; std::memcpy(&k, &z, sizeof k); return k;
-  }
+using DepthKey = std::conditional_t<sizeof(S) == 4, std::uint32_t, std::uint64_t>;
+
+/// Order-preserving unsigned key of a positive depth: its bit pattern.
+template <class S>
+inline DepthKey<S> depth_key(S z) {
+  static_assert(sizeof(S) == sizeof(DepthKey<S>));
+  DepthKey<S> k;
+  std::memcpy(&k, &z, sizeof k);
+  return k;
 }
 
 /// Number of fixed chunks a pass over `n` items is split into: independent of the thread count,
@@ -100,51 +109,73 @@ inline int fixed_chunks(std::size_t n) { return int(std::clamp<std::size_t>(n / 
 /// Stable LSD radix sort of `ids` by `keys` (bytes of the key, low to high, `key_bytes` of them);
 /// equal keys keep their input order, so ties stay ordered by Gaussian index. Each pass is a
 /// chunked counting sort (per-chunk histograms, then every chunk scatters from its own cursors),
-/// parallel over a fixed number of chunks. `keys2`, `ids2` and `hist` are scratch.
-inline void radix_sort_by_key(std::vector<std::uint64_t>& keys, std::vector<std::uint32_t>& ids, int key_bytes,
-                              std::vector<std::uint64_t>& keys2, std::vector<std::uint32_t>& ids2,
+/// parallel over a fixed number of chunks, all passes in one parallel region. `keys2`, `ids2` and
+/// `hist` are scratch. A stable sort has one result, so the chunking does not change a bit.
+template <class Key>
+inline void radix_sort_by_key(std::vector<Key>& keys, std::vector<std::uint32_t>& ids, int key_bytes,
+                              std::vector<Key>& keys2, std::vector<std::uint32_t>& ids2,
                               std::vector<std::uint64_t>& hist) {
+  static_assert(std::is_unsigned_v<Key>);
   const std::size_t n = keys.size();
   keys2.resize(n);
   ids2.resize(n);
   const int chunks = fixed_chunks(n);
   auto chunk_begin = [&](int k) { return n * std::size_t(k) / std::size_t(chunks); };
   hist.assign(std::size_t(chunks) * 256, 0);
-  for (int byte = 0; byte < key_bytes; ++byte) {
-    const unsigned shift = 8u * unsigned(byte);
-    std::fill(hist.begin(), hist.end(), 0);
-#pragma omp parallel for schedule(static)
-    for (int k = 0; k < chunks; ++k) {
-      std::uint64_t* h = hist.data() + std::size_t(k) * 256;
-      const std::size_t e = chunk_begin(k + 1);  // (hoisted: the stores below could alias it for the compiler)
-      for (std::size_t i = chunk_begin(k); i < e; ++i) ++h[(keys[i] >> shift) & 0xff];
-    }
-    // Every key shares this byte: the pass would be the identity.
-    bool trivial = false;
-    for (int b = 0; b < 256 && !trivial; ++b) {
-      std::uint64_t total = 0;
-      for (int k = 0; k < chunks; ++k) total += hist[std::size_t(k) * 256 + std::size_t(b)];
-      trivial = total == n;
-    }
-    if (trivial) continue;
-    std::uint64_t sum = 0;  // cursors: bucket-major, chunk-minor (stable)
-    for (int b = 0; b < 256; ++b)
+  bool skip = false;  // this pass would be the identity (written by one thread between barriers)
+  int passes = 0;     // passes that scattered: the result is in keys2 when odd
+#pragma omp parallel
+  {
+    Key* src = keys.data();
+    std::uint32_t* src_id = ids.data();
+    Key* dst = keys2.data();
+    std::uint32_t* dst_id = ids2.data();
+    for (int byte = 0; byte < key_bytes; ++byte) {
+      const unsigned shift = 8u * unsigned(byte);
+#pragma omp for schedule(static)
       for (int k = 0; k < chunks; ++k) {
-        std::uint64_t& h = hist[std::size_t(k) * 256 + std::size_t(b)];
-        const std::uint64_t c = h;
-        h = sum;
-        sum += c;
+        std::uint64_t* h = hist.data() + std::size_t(k) * 256;
+        std::fill_n(h, 256, std::uint64_t(0));
+        const std::size_t e = chunk_begin(k + 1);  // (hoisted: the stores below could alias it for the compiler)
+        for (std::size_t i = chunk_begin(k); i < e; ++i) ++h[(src[i] >> shift) & 0xff];
       }
-#pragma omp parallel for schedule(static)
-    for (int k = 0; k < chunks; ++k) {
-      std::uint64_t* cursor = hist.data() + std::size_t(k) * 256;
-      const std::size_t e = chunk_begin(k + 1);
-      for (std::size_t i = chunk_begin(k); i < e; ++i) {
-        const std::uint64_t p = cursor[(keys[i] >> shift) & 0xff]++;
-        keys2[p] = keys[i];
-        ids2[p] = ids[i];
+#pragma omp single
+      {
+        // Every key shares this byte: the pass would be the identity.
+        skip = false;
+        for (int b = 0; b < 256 && !skip; ++b) {
+          std::uint64_t total = 0;
+          for (int k = 0; k < chunks; ++k) total += hist[std::size_t(k) * 256 + std::size_t(b)];
+          skip = total == n;
+        }
+        if (!skip) {
+          std::uint64_t sum = 0;  // cursors: bucket-major, chunk-minor (stable)
+          for (int b = 0; b < 256; ++b)
+            for (int k = 0; k < chunks; ++k) {
+              std::uint64_t& h = hist[std::size_t(k) * 256 + std::size_t(b)];
+              const std::uint64_t c = h;
+              h = sum;
+              sum += c;
+            }
+          ++passes;
+        }
       }
+      if (skip) continue;  // every thread read the same flag: the single's barrier came before
+#pragma omp for schedule(static)
+      for (int k = 0; k < chunks; ++k) {
+        std::uint64_t* cursor = hist.data() + std::size_t(k) * 256;
+        const std::size_t e = chunk_begin(k + 1);
+        for (std::size_t i = chunk_begin(k); i < e; ++i) {
+          const std::uint64_t p = cursor[(src[i] >> shift) & 0xff]++;
+          dst[p] = src[i];
+          dst_id[p] = src_id[i];
+        }
+      }
+      std::swap(src, dst);
+      std::swap(src_id, dst_id);
     }
+  }
+  if (passes % 2 == 1) {
     keys.swap(keys2);
     ids.swap(ids2);
   }
@@ -178,7 +209,10 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
   //    (increasing ids, so ties stay ordered by id unless tie_key orders them below).
   //    The keys, and the pair count of every Gaussian (its tile-rectangle area, for step 2), are
   //    filled in one parallel pass.
-  sc.keys.resize(V);
+  const auto key_buffers = sc.template key_buffers<S>();
+  auto& keys = key_buffers.first;
+  auto& keys2 = key_buffers.second;
+  keys.resize(V);
   sc.pos.resize(V);
   out.pair_offset.resize(V + 1);
   out.pair_offset[0] = 0;
@@ -186,26 +220,26 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
   for (std::int64_t iv = 0; iv < std::int64_t(V); ++iv) {
     const std::size_t v = std::size_t(iv);
     const std::uint32_t g = visible_ids[v];
-    sc.keys[v] = detail::depth_key(depth[g]);
+    keys[v] = detail::depth_key(depth[g]);
     sc.pos[v] = std::uint32_t(v);
     const PixelRect& r = rects[g];
     out.pair_offset[v + 1] = std::uint64_t(r.x1 / TS - r.x0 / TS + 1) * std::uint64_t(r.y1 / TS - r.y0 / TS + 1);
   }
-  detail::radix_sort_by_key(sc.keys, sc.pos, int(sizeof(S)), sc.keys2, sc.pos2, sc.hist);
+  detail::radix_sort_by_key(keys, sc.pos, int(sizeof(S)), keys2, sc.pos2, sc.hist);
   if constexpr (!std::is_same_v<TieKey, TiesById>) {
     // Runs of equal depth keys, ordered by (tie key, id); positions are increasing ids within a run.
     // In parallel over fixed chunks: a run belongs to the chunk it starts in, and may end past it.
     // (Clones share their parent's depth until they move apart, so a frame has many such runs.)
     const int tchunks = detail::fixed_chunks(V);
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(dynamic, 1)
     for (int k = 0; k < tchunks; ++k) {
       const std::size_t c1 = V * std::size_t(k + 1) / std::size_t(tchunks);
       std::size_t i = V * std::size_t(k) / std::size_t(tchunks);
       if (i > 0)
-        while (i < c1 && sc.keys[i] == sc.keys[i - 1]) ++i;  // the rest of an earlier chunk's run
+        while (i < c1 && keys[i] == keys[i - 1]) ++i;  // the rest of an earlier chunk's run
       while (i < c1) {
         std::size_t e = i + 1;
-        while (e < V && sc.keys[e] == sc.keys[i]) ++e;
+        while (e < V && keys[e] == keys[i]) ++e;
         if (e - i > 1) {
           const auto by_key = [&](std::uint32_t a, std::uint32_t b) {
             const std::uint64_t ka = tie_key(visible_ids[a]), kb = tie_key(visible_ids[b]);
@@ -236,11 +270,12 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
   for (std::size_t v = 0; v < V; ++v) out.pair_offset[v + 1] += out.pair_offset[v];
   const std::uint64_t M = out.pair_offset[V];
 
-  // 3. Stable counting sort by tile over a fixed number of chunks.
+  // 3. Stable counting sort by tile over a fixed number of chunks, handed out one at a time: the
+  //    chunks are in depth order, and the near Gaussians cover more tiles than the far ones.
   const int chunks = detail::fixed_chunks(V);
   sc.hist.assign(std::size_t(chunks) * std::size_t(tiles), 0);  // [chunks, tiles]
   auto chunk_begin = [&](int k) { return V * std::size_t(k) / std::size_t(chunks); };
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(dynamic, 1)
   for (int k = 0; k < chunks; ++k) {
     std::uint64_t* h = sc.hist.data() + std::size_t(k) * std::size_t(tiles);
     const std::size_t e = chunk_begin(k + 1);
@@ -267,7 +302,7 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
   // Gaussians go in depth order, their pair slots in id order (pair_offset, pair_slot): both
   // accesses jump, so they are prefetched in two stages, the offset 2D ahead and the slots it
   // points at D ahead (every visible Gaussian has a pair, so that offset is below M).
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(dynamic, 1)
   for (int k = 0; k < chunks; ++k) {
     std::uint64_t* cursor = sc.hist.data() + std::size_t(k) * std::size_t(tiles);
     const std::size_t e = chunk_begin(k + 1);
