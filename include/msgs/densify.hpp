@@ -351,16 +351,28 @@ void for_each_array(GaussianModel<G, S>& m, F&& f) {
   f(m.sh, static_cast<std::size_t>(G::sh_coeffs), static_cast<std::size_t>(G::bands));
 }
 
+/// Memory the geometry arrays of a refinement are gathered into (gather_rows), one vector per row
+/// width: the arrays of a width (means and log-scales; rotations; opacities), of the model and of
+/// every optimiser state, pass one old array's memory on to the next.
+template <class S>
+struct GeometrySpares {
+  std::vector<S> w1, w3, w4;
+  std::vector<S>& of_width(std::size_t w) { return w == 1 ? w1 : w == 3 ? w3 : w4; }
+};
+
 /// Apply `plan` to every array of a model or of optimiser state in the model's layout: fresh rows
 /// zero with `zero_fresh`; with a `spare`, the band planes gathered out of place through it
-/// (gather_rows), the geometry arrays moved in place either way.
+/// (gather_rows); with `geometry`, the other arrays too (in parallel, where the in-place move of
+/// apply_rows_impl is one thread's memmove), else they move in place.
 template <class G, class S>
 void apply_arrays(const RefinePlan& plan, GaussianModel<G, S>& m, bool zero_fresh,
-                  std::type_identity_t<std::vector<S>>* spare, const char* what) {
+                  std::type_identity_t<std::vector<S>>* spare, const char* what,
+                  GeometrySpares<std::type_identity_t<S>>* geometry = nullptr) {
   m.check_consistent();
   plan.validate();
   for_each_array(m, [&](auto& v, std::size_t w, std::size_t planes) {
     if (spare && &v == &m.sh) gather_rows(plan, v, *spare, w, planes, zero_fresh, what);
+    else if (geometry && &v != &m.sh) gather_rows(plan, v, geometry->of_width(w), w, planes, zero_fresh, what);
     else apply_rows_impl(plan, v, w, zero_fresh, what, planes, true);
   });
 }
@@ -849,9 +861,9 @@ class DensityControl {
       reset_opacity(model, states...);
       rep.opacity_reset = true;
     }
-    if (step + 1 >= cfg_.refine_stop) {  // no refinement follows: give the spare's memory back
-      std::vector<float>().swap(spare_float_.values);
-      std::vector<double>().swap(spare_double_.values);
+    if (step + 1 >= cfg_.refine_stop) {  // no refinement follows: give the spares' memory back
+      spare_float_ = {};
+      spare_double_ = {};
     }
     rep.after = model.size();
     return rep;
@@ -982,7 +994,7 @@ class DensityControl {
     plan = plan.then(p_out);
 
     // ---- apply once, then place the split samples' means and scales ----
-    detail::apply_arrays(plan, model, false, spare_for<S>(), "apply(model)");
+    apply_spared(plan, model, false, "apply(model)");
     for (std::size_t f = 0; f < grown_row.size(); ++f) {
       const std::size_t r = grown_row[f];
       if (r < rest) continue;
@@ -1166,12 +1178,13 @@ class DensityControl {
     for (int r = 0; r < 3; ++r) out[r] = R[r][0] * local[0] + R[r][1] * local[1] + R[r][2] * local[2];
   }
 
-  /// Memory the band planes of a refinement are gathered into (detail::gather_rows), kept from
-  /// one refinement to the next and released after the last step before refine_stop; a copy of the
+  /// Memory the arrays of a refinement are gathered into (detail::gather_rows), kept from one
+  /// refinement to the next and released after the last step before refine_stop; a copy of the
   /// controller starts without it.
   template <class T>
   struct Spare {
-    std::vector<T> values;
+    std::vector<T> planes;                    // the band planes
+    detail::GeometrySpares<T> geometry;       // the other arrays, by row width
     Spare() = default;
     Spare(const Spare&) {}
     Spare& operator=(const Spare&) { return *this; }
@@ -1181,17 +1194,24 @@ class DensityControl {
   Spare<float> spare_float_;
   Spare<double> spare_double_;
 
-  template <class S>
-  std::vector<S>* spare_for() {
-    if constexpr (std::is_same_v<S, float>) return &spare_float_.values;
-    else if constexpr (std::is_same_v<S, double>) return &spare_double_.values;
-    else return nullptr;
+  /// detail::apply_arrays through the spares of S (in place for other scalar types).
+  template <class G, class S>
+  void apply_spared(const RefinePlan& plan, GaussianModel<G, S>& arrays, bool zero_fresh, const char* what) {
+    if constexpr (std::is_same_v<S, float> || std::is_same_v<S, double>) {
+      Spare<S>& sp = [this]() -> Spare<S>& {
+        if constexpr (std::is_same_v<S, float>) return spare_float_;
+        else return spare_double_;
+      }();
+      detail::apply_arrays(plan, arrays, zero_fresh, &sp.planes, what, &sp.geometry);
+    } else {
+      detail::apply_arrays(plan, arrays, zero_fresh, nullptr, what);
+    }
   }
 
-  /// Optimiser state follows the plan (zeros for new rows), its band planes through the spare.
+  /// Optimiser state follows the plan (zeros for new rows), through the spares.
   template <class G, class T>
   void apply_state(const RefinePlan& plan, GaussianModel<G, T>& state) {
-    detail::apply_arrays(plan, state, true, spare_for<T>(), "apply_zero_fresh(state)");
+    apply_spared(plan, state, true, "apply_zero_fresh(state)");
   }
 
   DensifyConfig cfg_;
