@@ -266,7 +266,7 @@ class Adam {
     constexpr int K = G::sh_coeffs;
     for (int i = 0; i < cs.count_; ++i) {
       const auto& ch = cs.channels_[static_cast<std::size_t>(i)];
-      for_each_run(cs.rows_, &rows, unlisted, [&](std::size_t row, std::size_t n, bool listed) {
+      for_each_run<true>(cs.rows_, &rows, unlisted, [&](std::size_t row, std::size_t n, bool listed) {
         if (listed) return;
         const std::size_t o = row * K;
         update_rows<K, true>(ch.p + o, ch.m + o, ch.v + o, nullptr, n, cs.betas_, ch.step_size.data(), ch.inv.data());
@@ -326,17 +326,16 @@ class Adam {
   /// listed, or the listed ones (ascending), in parallel over fixed chunks of the list
   /// (consecutive visible Gaussians then form long runs, which vectorise like the dense update);
   /// with Unlisted::zero_gradient also the runs between them, as not listed, in parallel over
-  /// fixed chunks of rows.
-  template <class F>
+  /// fixed chunks of rows: in two static halves (each core streams its half in order), or with
+  /// `Dynamic` a chunk at a time, for a caller that skips the listed runs (finish_colour): visible
+  /// rows cluster in the spatial order, so the halves would not be equal work. Every row is
+  /// independent: the schedule does not change a bit.
+  template <bool Dynamic = false, class F>
   static void for_each_run(std::size_t n, const std::vector<std::uint32_t>* rows, Unlisted unlisted, F&& f) {
     constexpr std::ptrdiff_t kChunk = 2048;
     if (rows && unlisted == Unlisted::zero_gradient) {
       const std::ptrdiff_t chunks = (static_cast<std::ptrdiff_t>(n) + kChunk - 1) / kChunk;
-      // Dynamic: a chunk of listed rows costs little here when the caller skips them
-      // (finish_colour), and visible rows cluster (spatial order), so equal halves of the rows are
-      // not equal work. Every row is independent: the schedule does not change a bit.
-#pragma omp parallel for schedule(dynamic, 1)
-      for (std::ptrdiff_t c = 0; c < chunks; ++c) {
+      const auto chunk = [&](std::ptrdiff_t c) {
         const std::size_t r0 = std::size_t(c * kChunk), r1 = std::min(n, std::size_t((c + 1) * kChunk));
         auto it = std::lower_bound(rows->begin(), rows->end(), std::uint32_t(r0));
         std::size_t r = r0;
@@ -353,6 +352,13 @@ class Adam {
             r = e;
           }
         }
+      };
+      if constexpr (Dynamic) {
+#pragma omp parallel for schedule(dynamic, 1)
+        for (std::ptrdiff_t c = 0; c < chunks; ++c) chunk(c);
+      } else {
+#pragma omp parallel for schedule(static)
+        for (std::ptrdiff_t c = 0; c < chunks; ++c) chunk(c);
       }
       return;
     }
