@@ -11,6 +11,8 @@
 #include <type_traits>
 #include <vector>
 
+#include "detail/overwrite_vector.hpp"
+
 namespace msgs {
 
 /// The screen split into square tiles.
@@ -61,8 +63,8 @@ struct Binning {
   /// passed to bin_gaussians): [pair_offset[v], pair_offset[v+1]). Id order lets the gradient
   /// reduction read the model sequentially.
   std::vector<std::uint64_t> pair_offset;
-  std::vector<std::uint64_t> pair_slot;    ///< [M] position of pair m in tile_list (pairs in tile order per Gaussian)
-  std::vector<std::uint32_t> tile_list;    ///< [M] Gaussian ids, grouped by tile, front to back within a tile
+  detail::OverwriteVector<std::uint64_t> pair_slot;  ///< [M] position of pair m in tile_list (pairs in tile order per Gaussian)
+  detail::OverwriteVector<std::uint32_t> tile_list;  ///< [M] Gaussian ids, grouped by tile, front to back within a tile
   std::vector<std::uint64_t> tile_offset;  ///< [tiles + 1] tile t owns tile_list[tile_offset[t] .. tile_offset[t+1])
 
   std::uint64_t pairs() const { return tile_list.size(); }
@@ -297,8 +299,8 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
     }
     out.tile_offset[std::size_t(t) + 1] = sum;
   }
-  out.tile_list.resize(M);
-  out.pair_slot.resize(M);
+  detail::resize_for_overwrite(out.tile_list, M);  // the scatter below writes every pair
+  detail::resize_for_overwrite(out.pair_slot, M);
   // Gaussians go in depth order, their pair slots in id order (pair_offset, pair_slot): both
   // accesses jump, so they are prefetched in two stages, the offset 2D ahead and the slots it
   // points at D ahead (every visible Gaussian has a pair, so that offset is below M).

@@ -17,6 +17,7 @@
 #include "blend.hpp"
 #include "camera.hpp"
 #include "colour_gradient_sink.hpp"
+#include "detail/overwrite_vector.hpp"
 #include "gaussian.hpp"
 #include "image.hpp"
 #include "project.hpp"
@@ -154,7 +155,7 @@ class Rasterizer {
     // Blend backward: one gradient record per intersection, per-tile background partials.
     using Rec = BlendRec;
     const int R = Rec::size(count_);
-    records_.resize(bins_.pairs() * std::uint64_t(R));
+    detail::resize_for_overwrite(records_, bins_.pairs() * std::uint64_t(R));  // every record is written
     bg_partial_.assign(std::size_t(grid_.count()) * std::size_t(count_), S(0));
     BlendGradInputs<S> gin;
     gin.d_image = d_image.data.data();
@@ -526,7 +527,7 @@ class Rasterizer {
     if constexpr (Opt.depth) out.depth = depth_image_.data.data();
     out.transmittance = transmittance_.data();
     out.last = last_.data();
-    block_mask_.resize(bins_.pairs());
+    detail::resize_for_overwrite(block_mask_, bins_.pairs());  // written for every pair
     out.block_mask = block_mask_.data();
     order_tiles();
     std::uint64_t frags = 0;
@@ -676,10 +677,10 @@ class Rasterizer {
   Image<S> image_, alpha_, depth_image_;
   std::vector<S> transmittance_;       // [H, W]
   std::vector<std::uint32_t> last_;    // [H, W]
-  std::vector<std::uint16_t> block_mask_;// [M] tile blocks each intersection blended into
+  detail::OverwriteVector<std::uint16_t> block_mask_;  // [M] tile blocks each intersection blended into
   std::uint64_t fragments_ = 0;
   std::vector<int> tile_order_;        // [tiles] the blend passes' order (order_tiles)
-  std::vector<S> records_;             // [M, BlendRecord<depth, absgrad>::size(count)]
+  detail::OverwriteVector<S> records_;  // [M, BlendRecord<depth, absgrad>::size(count)]
   std::vector<S> bg_partial_;          // [tiles, count]
 };
 

@@ -1,0 +1,54 @@
+// include/msgs/detail/overwrite_vector.hpp
+// Vectors for per-frame buffers that a pass overwrites whole before anything reads them (tile
+// lists, gradient records): growing one neither fills the new values nor copies the old ones.
+#pragma once
+
+#include <cstddef>
+#include <memory>
+#include <new>
+#include <type_traits>
+#include <utility>
+#include <vector>
+
+namespace msgs::detail {
+
+/// std::allocator whose value-less construct() default-initialises: resize() of a vector of
+/// trivial values with it leaves the new values unset instead of zeroing them.
+template <class T>
+struct NoFillAllocator : std::allocator<T> {
+  using value_type = T;
+  NoFillAllocator() noexcept = default;
+  template <class U>
+  NoFillAllocator(const NoFillAllocator<U>&) noexcept {}
+  template <class U>
+  struct rebind {
+    using other = NoFillAllocator<U>;
+  };
+  template <class U>
+  void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
+    ::new (static_cast<void*>(p)) U;
+  }
+  template <class U, class... A>
+  void construct(U* p, A&&... a) {
+    ::new (static_cast<void*>(p)) U(std::forward<A>(a)...);
+  }
+};
+
+/// A vector for a buffer whose every value is written before it is read.
+template <class T>
+using OverwriteVector = std::vector<T, NoFillAllocator<T>>;
+
+/// Size `v` to `n` values for a pass that writes all of them: no fill, and where the storage must
+/// grow, the old values are dropped instead of copied and half as much again is reserved, so that
+/// the next frames, a little larger, do not reallocate again. The new pages are first touched by
+/// the pass that writes them (in parallel), not by a serial copy and fill here.
+template <class T>
+void resize_for_overwrite(OverwriteVector<T>& v, std::size_t n) {
+  if (n > v.capacity()) {
+    OverwriteVector<T>().swap(v);
+    v.reserve(n + n / 2);
+  }
+  v.resize(n);
+}
+
+}  // namespace msgs::detail
