@@ -20,6 +20,7 @@
 #endif
 
 #include "msgs/detail/math.hpp"
+#include "msgs/detail/overwrite_vector.hpp"
 #include "msgs/gaussian.hpp"
 #include "msgs/schedule.hpp"
 #include "msgs/spatial_order.hpp"
@@ -306,7 +307,7 @@ inline void stream_fence() {
 /// output row written once; the planes change stride on the way), then `rows` and `spare` swap, so
 /// that `spare` holds the old values' memory for the next array of the same shape. Reusing that
 /// memory from one refinement to the next spares the page faults of a fresh allocation; headroom of
-/// a quarter is reserved when it grows. The values are those of apply_rows_impl.
+/// a half is reserved when it grows (resize_for_overwrite). The values are those of apply_rows_impl.
 template <class T>
 void gather_rows(const RefinePlan& plan, std::vector<T>& rows, std::vector<T>& spare, std::size_t width,
                  std::size_t planes, bool zero_fresh, const char* what) {
@@ -315,12 +316,7 @@ void gather_rows(const RefinePlan& plan, std::vector<T>& rows, std::vector<T>& s
     throw std::invalid_argument(std::string(what) + ": array has " + std::to_string(rows.size()) + " values, plan expects " +
                                 std::to_string(planes) + " x " + std::to_string(n) + " rows of " +
                                 std::to_string(width));
-  const std::size_t need = planes * m * w;
-  if (need > spare.capacity()) {
-    std::vector<T>().swap(spare);  // nothing to keep: no copy into the new block
-    spare.reserve(need + need / 4);
-  }
-  spare.resize(need);
+  resize_for_overwrite(spare, planes * m * w);  // nothing to keep: no copy into a new block
   const std::ptrdiff_t sm = static_cast<std::ptrdiff_t>(m);
   const std::uint32_t* source = plan.source.data();
 #pragma omp parallel

@@ -38,14 +38,15 @@ struct NoFillAllocator : std::allocator<T> {
 template <class T>
 using OverwriteVector = std::vector<T, NoFillAllocator<T>>;
 
-/// Size `v` to `n` values for a pass that writes all of them: no fill, and where the storage must
-/// grow, the old values are dropped instead of copied and half as much again is reserved, so that
-/// the next frames, a little larger, do not reallocate again. The new pages are first touched by
-/// the pass that writes them (in parallel), not by a serial copy and fill here.
-template <class T>
-void resize_for_overwrite(OverwriteVector<T>& v, std::size_t n) {
+/// Size `v` to `n` values for a pass that writes all of them: where the storage must grow, the
+/// old values are dropped instead of copied and half as much again is reserved, so that the next
+/// calls, a little larger, do not reallocate again. An OverwriteVector is not filled either: its
+/// new pages are first touched by the pass that writes them (in parallel), not by a serial copy
+/// and fill here. (Any std::vector works; one with the standard allocator is zero-filled.)
+template <class T, class A>
+void resize_for_overwrite(std::vector<T, A>& v, std::size_t n) {
   if (n > v.capacity()) {
-    OverwriteVector<T>().swap(v);
+    std::vector<T, A>().swap(v);
     v.reserve(n + n / 2);
   }
   v.resize(n);
