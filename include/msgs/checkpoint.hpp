@@ -49,19 +49,21 @@ inline constexpr char kCheckpointMagicV1[8] = {'M', 'S', 'G', 'S', 'C', 'K', 'P'
 /// without exposure, every older file) end right after the statistics, as before.
 inline constexpr char kExposureSectionTag[8] = {'E', 'X', 'P', 'O', 'S', 'R', 'E', '1'};
 
+/// Writes the fields straight to the file: a checkpoint (the model and both Adam moments) is
+/// never assembled in memory, which would double what a save needs at its peak.
 class CkptWriter {
  public:
+  explicit CkptWriter(std::ostream& out) : out_(out) {}
   template <class T>
-  void pod(const T& v) { buf_.append(reinterpret_cast<const char*>(&v), sizeof(T)); }
+  void pod(const T& v) { out_.write(reinterpret_cast<const char*>(&v), sizeof(T)); }
   template <class T>
   void vec(const std::vector<T>& v) {
     pod(std::uint64_t(v.size()));
-    if (!v.empty()) buf_.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T));
+    if (!v.empty()) out_.write(reinterpret_cast<const char*>(v.data()), std::streamsize(v.size() * sizeof(T)));
   }
-  const std::string& bytes() const { return buf_; }
 
  private:
-  std::string buf_;
+  std::ostream& out_;
 };
 
 class CkptReader {
@@ -135,10 +137,14 @@ GaussianModel<G, float> read_model(CkptReader& r, std::uint64_t n, bool sh_inter
 
 }  // namespace detail
 
-/// Write `st` to `path` atomically.
+/// Write `st` to `path` atomically (a temporary beside it, renamed when complete).
 template <class G>
 void save_checkpoint(const std::filesystem::path& path, const TrainState<G>& st) {
-  detail::CkptWriter w;
+  if (!st.exposure.empty()) st.exposure.validate("save_checkpoint");  // before anything is written
+  io::AtomicFile file(path);
+  std::ofstream out(file.temp(), std::ios::binary | std::ios::trunc);
+  if (!out) io::fail(path, "cannot open for writing (directory missing or not writable?)");
+  detail::CkptWriter w(out);
   for (char c : detail::kCheckpointMagic) w.pod(c);
   w.pod(std::int32_t(G::bands));
   w.pod(std::int32_t(G::sh_degree));
@@ -159,7 +165,6 @@ void save_checkpoint(const std::filesystem::path& path, const TrainState<G>& st)
   w.vec(st.stats_radius);
   if (!st.exposure.empty()) {
     const ExposureState& e = st.exposure;
-    e.validate("save_checkpoint");
     for (char c : detail::kExposureSectionTag) w.pod(c);
     w.vec(e.frames);
     w.vec(e.channels);
@@ -171,7 +176,9 @@ void save_checkpoint(const std::filesystem::path& path, const TrainState<G>& st)
     w.vec(e.v_offset);
     w.vec(e.steps);
   }
-  io::write_text_atomic(path, w.bytes());
+  out.close();
+  if (!out) io::fail(path, "write error (disk full?)");
+  file.commit();
 }
 
 /// Read a checkpoint written by save_checkpoint for the same Gaussian type.
