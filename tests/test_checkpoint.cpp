@@ -269,4 +269,16 @@ TEST_CASE("checkpoint files refuse the wrong model type, truncation and trailing
   const fs::path junk = scratch() / "junk.ckpt";
   io::write_text_atomic(junk, "not a checkpoint at all");
   CHECK_THROWS_WITH_AS(load_checkpoint<G>(junk), doctest::Contains("magic"), std::runtime_error);
+
+  // A save that cannot write says where and why, and leaves the old checkpoint as it was.
+  const fs::path nowhere = scratch() / "no_such_folder" / "x.ckpt";
+  CHECK_THROWS_WITH_AS(save_checkpoint(nowhere, t.state(20)), doctest::Contains("cannot open for writing"),
+                       std::runtime_error);
+  CHECK_FALSE(fs::exists(nowhere.parent_path()));
+  TrainState<G> bad = t.state(20);
+  bad.exposure.frames = {0};  // an exposure section whose arrays do not match
+  CHECK_THROWS_AS(save_checkpoint(p, bad), std::runtime_error);
+  CHECK(io::read_bytes(p) == bytes);
+  for (const auto& e : fs::directory_iterator(p.parent_path()))
+    CHECK(e.path().filename().string().find(".tmp-") == std::string::npos);
 }
