@@ -141,44 +141,40 @@ GaussianModel<G, float> read_model(CkptReader& r, std::uint64_t n, bool sh_inter
 template <class G>
 void save_checkpoint(const std::filesystem::path& path, const TrainState<G>& st) {
   if (!st.exposure.empty()) st.exposure.validate("save_checkpoint");  // before anything is written
-  io::AtomicFile file(path);
-  std::ofstream out(file.temp(), std::ios::binary | std::ios::trunc);
-  if (!out) io::fail(path, "cannot open for writing (directory missing or not writable?)");
-  detail::CkptWriter w(out);
-  for (char c : detail::kCheckpointMagic) w.pod(c);
-  w.pod(std::int32_t(G::bands));
-  w.pod(std::int32_t(G::sh_degree));
-  w.pod(std::int64_t(st.step));
-  w.pod(std::uint64_t(st.model.size()));
-  detail::write_model(w, st.model);
-  detail::write_model(w, st.exp_avg);
-  detail::write_model(w, st.exp_avg_sq);
-  w.pod(std::int64_t(st.adam_steps.means));
-  w.pod(std::int64_t(st.adam_steps.scales));
-  w.pod(std::int64_t(st.adam_steps.quats));
-  w.pod(std::int64_t(st.adam_steps.opacities));
-  for (auto s : st.adam_steps.sh) w.pod(std::int64_t(s));
-  w.pod(std::int64_t(st.adam_iteration));
-  w.pod(std::int32_t(st.stats_bands));
-  w.vec(st.stats_grad);
-  w.vec(st.stats_count);
-  w.vec(st.stats_radius);
-  if (!st.exposure.empty()) {
-    const ExposureState& e = st.exposure;
-    for (char c : detail::kExposureSectionTag) w.pod(c);
-    w.vec(e.frames);
-    w.vec(e.channels);
-    w.vec(e.log_gain);
-    w.vec(e.offset);
-    w.vec(e.m_log_gain);
-    w.vec(e.v_log_gain);
-    w.vec(e.m_offset);
-    w.vec(e.v_offset);
-    w.vec(e.steps);
-  }
-  out.close();
-  if (!out) io::fail(path, "write error (disk full?)");
-  file.commit();
+  io::write_stream_atomic(path, [&](std::ostream& out) {
+    detail::CkptWriter w(out);
+    for (char c : detail::kCheckpointMagic) w.pod(c);
+    w.pod(std::int32_t(G::bands));
+    w.pod(std::int32_t(G::sh_degree));
+    w.pod(std::int64_t(st.step));
+    w.pod(std::uint64_t(st.model.size()));
+    detail::write_model(w, st.model);
+    detail::write_model(w, st.exp_avg);
+    detail::write_model(w, st.exp_avg_sq);
+    w.pod(std::int64_t(st.adam_steps.means));
+    w.pod(std::int64_t(st.adam_steps.scales));
+    w.pod(std::int64_t(st.adam_steps.quats));
+    w.pod(std::int64_t(st.adam_steps.opacities));
+    for (auto s : st.adam_steps.sh) w.pod(std::int64_t(s));
+    w.pod(std::int64_t(st.adam_iteration));
+    w.pod(std::int32_t(st.stats_bands));
+    w.vec(st.stats_grad);
+    w.vec(st.stats_count);
+    w.vec(st.stats_radius);
+    if (!st.exposure.empty()) {
+      const ExposureState& e = st.exposure;
+      for (char c : detail::kExposureSectionTag) w.pod(c);
+      w.vec(e.frames);
+      w.vec(e.channels);
+      w.vec(e.log_gain);
+      w.vec(e.offset);
+      w.vec(e.m_log_gain);
+      w.vec(e.v_log_gain);
+      w.vec(e.m_offset);
+      w.vec(e.v_offset);
+      w.vec(e.steps);
+    }
+  });
 }
 
 /// Read a checkpoint written by save_checkpoint for the same Gaussian type.

@@ -138,17 +138,24 @@ class StagedDirectory {
   bool keep_ = false;
 };
 
-/// Write `n` bytes to `p` atomically.
-inline void write_bytes_atomic(const std::filesystem::path& p, const void* data, std::size_t n) {
+/// Write `p` atomically: write(out) fills a binary stream on a temporary beside `p`, which is
+/// renamed onto `p` when complete (and removed if anything throws).
+template <class Write>
+void write_stream_atomic(const std::filesystem::path& p, Write&& write) {
   AtomicFile f(p);
   {
     std::ofstream out(f.temp(), std::ios::binary | std::ios::trunc);
     if (!out) fail(p, "cannot open for writing (directory missing or not writable?)");
-    out.write(static_cast<const char*>(data), static_cast<std::streamsize>(n));
+    write(out);
     out.flush();
     if (!out) fail(p, "write error (disk full?)");
   }
   f.commit();
+}
+
+/// Write `n` bytes to `p` atomically.
+inline void write_bytes_atomic(const std::filesystem::path& p, const void* data, std::size_t n) {
+  write_stream_atomic(p, [&](std::ostream& out) { out.write(static_cast<const char*>(data), static_cast<std::streamsize>(n)); });
 }
 
 /// Write a string to `p` atomically.
