@@ -251,6 +251,15 @@ TEST_CASE("checkpoint files refuse the wrong model type, truncation and trailing
   const fs::path p = scratch() / "small.ckpt";
   save_checkpoint(p, t.state(20));
   check_same(load_checkpoint<G>(p), t.state(20));
+  // A trainer's checkpoint is written from a view of its live state, without a copy: the same bytes.
+  const fs::path viewed = scratch() / "viewed.ckpt";
+  save_checkpoint(viewed, t.state_view(20));
+  CHECK(io::read_bytes(viewed) == io::read_bytes(p));
+  TrainStateView<G> partial = t.state_view(20);
+  partial.exp_avg = nullptr;
+  CHECK_THROWS_WITH_AS(save_checkpoint(scratch() / "partial.ckpt", partial), doctest::Contains("missing a field"),
+                       std::invalid_argument);
+  CHECK_FALSE(fs::exists(scratch() / "partial.ckpt"));
 
   using Rgb = Gaussian<3, 1>;
   CHECK_THROWS_WITH_AS(load_checkpoint<Rgb>(p), doctest::Contains("expected Gaussian<3"), std::runtime_error);

@@ -38,6 +38,28 @@ struct TrainState {
   ExposureState exposure;                 ///< per-image corrections (empty unless TrainOptions::exposure)
 };
 
+/// A TrainState's fields by reference: what save_checkpoint writes, taken straight from a live
+/// trainer without copying its model and moments. Valid while the objects it refers to are.
+template <class G>
+struct TrainStateView {
+  long long step = 0;
+  const GaussianModel<G, float>* model = nullptr;
+  const GaussianModel<G, float>* exp_avg = nullptr;
+  const GaussianModel<G, float>* exp_avg_sq = nullptr;
+  typename Adam<G, float>::Steps adam_steps{};
+  std::int64_t adam_iteration = 0;
+  int stats_bands = 1;
+  const std::vector<float>* stats_grad = nullptr;
+  const std::vector<std::uint32_t>* stats_count = nullptr;
+  const std::vector<float>* stats_radius = nullptr;
+  const ExposureState* exposure = nullptr;  ///< nullptr or empty: no exposure section
+
+  static TrainStateView of(const TrainState<G>& st) {
+    return {st.step,        &st.model,      &st.exp_avg,     &st.exp_avg_sq,   st.adam_steps, st.adam_iteration,
+            st.stats_bands, &st.stats_grad, &st.stats_count, &st.stats_radius, &st.exposure};
+  }
+};
+
 namespace detail {
 
 /// Version 2 stores SH in band planes [Bands, N, K]; version 1 (before 2026-11) stored [N, K, Bands]
@@ -139,18 +161,21 @@ GaussianModel<G, float> read_model(CkptReader& r, std::uint64_t n, bool sh_inter
 
 /// Write `st` to `path` atomically (a temporary beside it, renamed when complete).
 template <class G>
-void save_checkpoint(const std::filesystem::path& path, const TrainState<G>& st) {
-  if (!st.exposure.empty()) st.exposure.validate("save_checkpoint");  // before anything is written
+void save_checkpoint(const std::filesystem::path& path, const TrainStateView<G>& st) {
+  if (!st.model || !st.exp_avg || !st.exp_avg_sq || !st.stats_grad || !st.stats_count || !st.stats_radius)
+    throw std::invalid_argument("save_checkpoint: the state view of " + path.string() + " is missing a field");
+  const bool exposure = st.exposure && !st.exposure->empty();
+  if (exposure) st.exposure->validate("save_checkpoint");  // before anything is written
   io::write_stream_atomic(path, [&](std::ostream& out) {
     detail::CkptWriter w(out);
     for (char c : detail::kCheckpointMagic) w.pod(c);
     w.pod(std::int32_t(G::bands));
     w.pod(std::int32_t(G::sh_degree));
     w.pod(std::int64_t(st.step));
-    w.pod(std::uint64_t(st.model.size()));
-    detail::write_model(w, st.model);
-    detail::write_model(w, st.exp_avg);
-    detail::write_model(w, st.exp_avg_sq);
+    w.pod(std::uint64_t(st.model->size()));
+    detail::write_model(w, *st.model);
+    detail::write_model(w, *st.exp_avg);
+    detail::write_model(w, *st.exp_avg_sq);
     w.pod(std::int64_t(st.adam_steps.means));
     w.pod(std::int64_t(st.adam_steps.scales));
     w.pod(std::int64_t(st.adam_steps.quats));
@@ -158,11 +183,11 @@ void save_checkpoint(const std::filesystem::path& path, const TrainState<G>& st)
     for (auto s : st.adam_steps.sh) w.pod(std::int64_t(s));
     w.pod(std::int64_t(st.adam_iteration));
     w.pod(std::int32_t(st.stats_bands));
-    w.vec(st.stats_grad);
-    w.vec(st.stats_count);
-    w.vec(st.stats_radius);
-    if (!st.exposure.empty()) {
-      const ExposureState& e = st.exposure;
+    w.vec(*st.stats_grad);
+    w.vec(*st.stats_count);
+    w.vec(*st.stats_radius);
+    if (exposure) {
+      const ExposureState& e = *st.exposure;
       for (char c : detail::kExposureSectionTag) w.pod(c);
       w.vec(e.frames);
       w.vec(e.channels);
@@ -175,6 +200,11 @@ void save_checkpoint(const std::filesystem::path& path, const TrainState<G>& st)
       w.vec(e.steps);
     }
   });
+}
+
+template <class G>
+void save_checkpoint(const std::filesystem::path& path, const TrainState<G>& st) {
+  save_checkpoint(path, TrainStateView<G>::of(st));
 }
 
 /// Read a checkpoint written by save_checkpoint for the same Gaussian type.

@@ -95,15 +95,22 @@ struct GaussianModel {
     sh.swap(planes);
   }
 
-  /// Resize every array to `n` Gaussians without keeping the values in place: the contents are
-  /// unspecified (band planes shift), there is no copy. For buffers that are rewritten anyway
-  /// (gradients); `resize` keeps values.
+  /// Resize every array to `n` Gaussians without keeping the values: the contents are unspecified
+  /// (band planes shift; storage that grows starts over, with room for half as many again), there
+  /// is no copy. For buffers that are rewritten anyway (gradients); `resize` keeps values.
   void reshape(std::size_t n) {
-    means.resize(n * 3);
-    log_scales.resize(n * 3);
-    quats.resize(n * 4);
-    opacity_logits.resize(n);
-    sh.resize(n * static_cast<std::size_t>(G::sh_floats));
+    const auto fit = [](std::vector<S>& v, std::size_t count) {  // as detail::resize_for_overwrite
+      if (count > v.capacity()) {
+        std::vector<S>().swap(v);
+        v.reserve(count + count / 2);
+      }
+      v.resize(count);
+    };
+    fit(means, n * 3);
+    fit(log_scales, n * 3);
+    fit(quats, n * 4);
+    fit(opacity_logits, n);
+    fit(sh, n * static_cast<std::size_t>(G::sh_floats));
   }
 
   /// Fill every array with zero (keeps the size); used for gradient buffers.

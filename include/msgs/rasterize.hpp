@@ -147,8 +147,8 @@ class Rasterizer {
     const Model& model = *model_;
     const std::size_t N = model.size();
     if (grads.model.size() != N) grads.model.reshape(N);  // every row read below is written below
-    grads.mean2d.resize(2 * N);
-    if constexpr (Opt.absgrad) grads.absgrad.resize(2 * N);
+    detail::resize_for_overwrite(grads.mean2d, 2 * N);  // as the model's rows
+    if constexpr (Opt.absgrad) detail::resize_for_overwrite(grads.absgrad, 2 * N);
     else grads.absgrad.clear();
     if (fill == GradientFill::dense) zero_unseen(grads, /*zero_colour=*/colour == nullptr);
 

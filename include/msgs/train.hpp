@@ -308,20 +308,39 @@ class Trainer {
 
   /// Everything needed to continue at `next_step` bit for bit.
   TrainState<G> state(long long next_step) const {
+    const TrainStateView<G> v = state_view(next_step);
     TrainState<G> st;
-    st.step = next_step;
-    st.model = model_;
-    st.exp_avg = adam_.exp_avg;
-    st.exp_avg_sq = adam_.exp_avg_sq;
-    st.adam_steps = adam_.steps;
-    st.adam_iteration = adam_.iteration;
-    const DensityStats& ds = density_.stats();
-    st.stats_bands = ds.bands();
-    st.stats_grad = ds.grad_sums();
-    st.stats_count = ds.counts();
-    st.stats_radius = ds.max_radii();
-    if (opt_.exposure) st.exposure = exposure_.state();
+    st.step = v.step;
+    st.model = *v.model;
+    st.exp_avg = *v.exp_avg;
+    st.exp_avg_sq = *v.exp_avg_sq;
+    st.adam_steps = v.adam_steps;
+    st.adam_iteration = v.adam_iteration;
+    st.stats_bands = v.stats_bands;
+    st.stats_grad = *v.stats_grad;
+    st.stats_count = *v.stats_count;
+    st.stats_radius = *v.stats_radius;
+    if (v.exposure) st.exposure = *v.exposure;
     return st;
+  }
+
+  /// The same, by reference into this trainer (what a checkpoint writes, without a copy); valid
+  /// until training goes on.
+  TrainStateView<G> state_view(long long next_step) const {
+    const DensityStats& ds = density_.stats();
+    TrainStateView<G> v;
+    v.step = next_step;
+    v.model = &model_;
+    v.exp_avg = &adam_.exp_avg;
+    v.exp_avg_sq = &adam_.exp_avg_sq;
+    v.adam_steps = adam_.steps;
+    v.adam_iteration = adam_.iteration;
+    v.stats_bands = ds.bands();
+    v.stats_grad = &ds.grad_sums();
+    v.stats_count = &ds.counts();
+    v.stats_radius = &ds.max_radii();
+    v.exposure = opt_.exposure ? &exposure_.state() : nullptr;
+    return v;
   }
 
   /// Continue from a saved state; returns the step to resume at. The anytime-evaluation curve and
@@ -590,7 +609,7 @@ class Trainer {
   /// Checkpoint (and the curve with its clock, when recorded) at `next_step`; `tick` brings the clock up to now.
   template <class Tick>
   void checkpoint(long long next_step, Tick&& tick) {
-    save_checkpoint(opt_.checkpoint_path, state(next_step));
+    save_checkpoint(opt_.checkpoint_path, state_view(next_step));
     if (opt_.curve.enabled()) {
       tick();
       save_curve(curve_path(), clock_, curve_);
