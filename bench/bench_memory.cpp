@@ -109,7 +109,7 @@ void BM_TrainStepMemory(benchmark::State& state) {
       N * double(sizeof(Splat<float>) + count * sizeof(float) + sizeof(float) + sizeof(PixelRect) + 2 * sizeof(std::int32_t) + 1) / kMiB +
       V * (4 + 4 + 8) / kMiB;  // visible ids, depth order, pair offsets
   k["raster_per_intersection_MiB"] =
-      M * double(sizeof(std::uint32_t) + sizeof(std::uint64_t) + sizeof(std::uint16_t)) / kMiB;  // tile_list, pair_slot, block_mask
+      M * double(sizeof(std::uint32_t) + sizeof(std::uint64_t) + sizeof(std::uint16_t)) / kMiB;  // tile_list, pair_index, block_mask
   k["grad_records_MiB"] = M * double(BlendRecord<false, true>::size(count)) * sizeof(float) / kMiB;
   k["images_MiB"] = double(spec.width) * spec.height * (3 * count + 3) * sizeof(float) / kMiB;  // render, gt, d_image, alpha, T, last
   k["intersections"] = M;

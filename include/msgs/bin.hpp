@@ -63,7 +63,10 @@ struct Binning {
   /// passed to bin_gaussians): [pair_offset[v], pair_offset[v+1]). Id order lets the gradient
   /// reduction read the model sequentially.
   std::vector<std::uint64_t> pair_offset;
-  detail::OverwriteVector<std::uint64_t> pair_slot;  ///< [M] position of pair m in tile_list (pairs in tile order per Gaussian)
+  /// [M] the pair at tile_list position s is pair pair_index[s] of its Gaussian's range above: the
+  /// blend backward writes each pair's gradient record there, so that the reduction reads each
+  /// Gaussian's records in one sequential run.
+  detail::OverwriteVector<std::uint64_t> pair_index;
   detail::OverwriteVector<std::uint32_t> tile_list;  ///< [M] Gaussian ids, grouped by tile, front to back within a tile
   std::vector<std::uint64_t> tile_offset;  ///< [tiles + 1] tile t owns tile_list[tile_offset[t] .. tile_offset[t+1])
 
@@ -300,18 +303,16 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
     out.tile_offset[std::size_t(t) + 1] = sum;
   }
   detail::resize_for_overwrite(out.tile_list, M);  // the scatter below writes every pair
-  detail::resize_for_overwrite(out.pair_slot, M);
-  // Gaussians go in depth order, their pair slots in id order (pair_offset, pair_slot): both
-  // accesses jump, so they are prefetched in two stages, the offset 2D ahead and the slots it
-  // points at D ahead (every visible Gaussian has a pair, so that offset is below M).
+  detail::resize_for_overwrite(out.pair_index, M);
+  // Gaussians go in depth order, their pair offsets in id order: that access jumps, so it is
+  // prefetched D ahead.
 #pragma omp parallel for schedule(dynamic, 1)
   for (int k = 0; k < chunks; ++k) {
     std::uint64_t* cursor = sc.hist.data() + std::size_t(k) * std::size_t(tiles);
     const std::size_t e = chunk_begin(k + 1);
     constexpr std::size_t D = std::size_t(kBinPrefetch);
     for (std::size_t s = chunk_begin(k); s < e; ++s) {
-      if (s + 2 * D < e) __builtin_prefetch(&out.pair_offset[sc.pos[s + 2 * D]]);
-      if (s + D < e) __builtin_prefetch(&out.pair_slot[out.pair_offset[sc.pos[s + D]]], 1);
+      if (s + D < e) __builtin_prefetch(&out.pair_offset[sc.pos[s + D]]);
       const std::uint32_t g = out.order[s];
       const Binning::Scratch::TileRect& r = sc.rects[s];
       std::uint64_t m = out.pair_offset[sc.pos[s]];
@@ -319,7 +320,7 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
         for (int tx = r.tx0; tx <= r.tx1; ++tx) {
           const std::uint64_t slot = cursor[std::size_t(ty) * std::size_t(grid.tiles_x) + std::size_t(tx)]++;
           out.tile_list[slot] = g;
-          out.pair_slot[m++] = slot;
+          out.pair_index[slot] = m++;
         }
     }
   }

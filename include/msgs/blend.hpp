@@ -40,6 +40,8 @@ inline void set_sigma_cut(Splat<S>& s, double support) {
 
 /// How many tile-list entries ahead the blend loops prefetch splat data (random access by id).
 inline constexpr std::uint64_t kPrefetchDistance = 4;
+/// How many splats ahead the blend backward fetches the gradient record it will write.
+inline constexpr std::uint64_t kRecordPrefetchDistance = 16;
 
 /// Blending constants (REFERENCE §6).
 template <class S>
@@ -431,7 +433,10 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
 /// Backward of blend_tile_fwd for one tile: walks the tile's list back to front, rebuilding each
 /// pixel's transmittance by division (alpha <= 0.99 keeps it well conditioned), and writes one
 /// gradient record per intersection of the tile into `records` ([M, BlendRecord<Depth,
-/// AbsGrad>::size(count)], row = position in the tile list; zeros where the block mask is 0). Adds
+/// AbsGrad>::size(count)], row = the pair's index in Gaussian order, Binning::pair_index), except
+/// where the block mask is 0: the caller fills `records` with zeros first, in one sequential pass,
+/// and the records of the splats that blended nowhere (most of them, in a deep scene) are not
+/// written a second time at scattered places. Adds
 /// the tile's background gradient into `d_background` ([count]). Alpha is evaluated by the same
 /// expressions as in the forward, so both make the same fragment decisions.
 template <class S, int C, int MaxC, bool Depth, bool AbsGrad>
@@ -522,21 +527,24 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
   constexpr int NL = kAbsX + (AbsGrad ? 2 : 0);  // only the accumulators this instantiation uses
   constexpr int P = TBk::kPerSide;
   const std::uint32_t* list = in.bins->tile_list.data();
+  const std::uint64_t* pair_index = in.bins->pair_index.data();
   for (std::uint64_t jr = begin + max_last; jr-- > begin;) {
     if (jr >= begin + kPrefetchDistance) {
       const std::uint32_t gp = list[jr - kPrefetchDistance];
       __builtin_prefetch(in.splats + gp);
       __builtin_prefetch(in.colours + std::size_t(gp) * std::size_t(nc));
     }
-    S* rec = records + jr * std::uint64_t(R);
-    // A splat the forward blended into no pixel of this tile (its box touches the tile, its
-    // alpha >= 1/255 region does not, or every pixel had stopped) has no gradient here. Its record
-    // is written all the same (zeros; the records are written in list order, so that is cheap),
-    // so that the gradient reduction reads records only, not the block masks at scattered slots.
-    if (block_mask[jr] == 0) {
-      std::fill_n(rec, R, S(0));
-      continue;
+    if (jr >= begin + kRecordPrefetchDistance && block_mask[jr - kRecordPrefetchDistance] != 0) {
+      // The record a splat further on will write (records scatter): fetched for writing.
+      const S* rp = records + pair_index[jr - kRecordPrefetchDistance] * std::uint64_t(R);
+      __builtin_prefetch(rp, 1);
+      __builtin_prefetch(rp + R - 1, 1);
     }
+    // A splat the forward blended into no pixel of this tile (its box touches the tile, its
+    // alpha >= 1/255 region does not, or every pixel had stopped) has no gradient here: its
+    // record keeps the zeros the caller wrote.
+    if (block_mask[jr] == 0) continue;
+    S* rec = records + pair_index[jr] * std::uint64_t(R);
     const std::uint32_t g = list[jr];
     const Splat<S> s = in.splats[g];
     U k;  // a pixel blended this splat iff k < last
@@ -631,8 +639,7 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
       rec[Rec::abs_x(nc) + 1] = sum[kAbsY];
     }
   }
-  // Splats behind every pixel's last blended one (block mask 0, see blend_tile_fwd): zero records.
-  std::fill(records + (begin + max_last) * std::uint64_t(R), records + end * std::uint64_t(R), S(0));
+  // Splats behind every pixel's last blended one (block mask 0, see blend_tile_fwd) keep zero records.
 }
 
 }  // namespace msgs

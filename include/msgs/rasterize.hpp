@@ -83,8 +83,6 @@ class Rasterizer {
  public:
   using Model = GaussianModel<G, S>;
   static constexpr int kBands = G::bands;
-  /// How many pairs ahead the gradient reduction prefetches intersection records.
-  static constexpr std::uint64_t kRecordPrefetch = 32;
 
   /// Render `model` from `cam`. Returns the image [H, W, band_count].
   const Image<S>& forward(const Model& model, const Camera<S>& cam, const RenderSettings<S>& settings = {}) {
@@ -155,7 +153,8 @@ class Rasterizer {
     // Blend backward: one gradient record per intersection, per-tile background partials.
     using Rec = BlendRec;
     const int R = Rec::size(count_);
-    detail::resize_for_overwrite(records_, bins_.pairs() * std::uint64_t(R));  // every record is written
+    detail::resize_for_overwrite(records_, bins_.pairs() * std::uint64_t(R));
+    zero_records();  // the blend backward writes the pairs that blended only
     bg_partial_.assign(std::size_t(grid_.count()) * std::size_t(count_), S(0));
     BlendGradInputs<S> gin;
     gin.d_image = d_image.data.data();
@@ -179,15 +178,15 @@ class Rasterizer {
 
     const auto t1 = clock::now();
     // Per-Gaussian reduction in a fixed (tile) order, then projection and colour backward.
-    // Gaussians are visited in index order (model, gradients and pair lists are then read and
-    // written sequentially); only their intersection records are scattered over the tile lists.
+    // Gaussians are visited in index order, and the blend backward wrote each one's intersection
+    // records together, in that order (Binning::pair_index): model, gradients and records are
+    // read and written sequentially.
     // Gaussians are projected a vector of lanes at a time (detail::project_bwd_lanes, the same bits
     // as one at a time), in fixed batches of consecutive visible ids; in single precision the
     // lanes it hands back are redone one at a time in double, as the forward did.
     using D = ProjLanes;
     constexpr int L = detail::Lanes<D>::kCount;
     const std::int64_t V = std::int64_t(visible_.size()), batches = (V + L - 1) / L;
-    const std::uint64_t M = bins_.pairs();
     const int first = first_, count = count_;
 #pragma omp parallel for schedule(dynamic, 32)
     for (std::int64_t bi = 0; bi < batches; ++bi) {
@@ -212,16 +211,9 @@ class Rasterizer {
       double acc[L][Rec::size(kBands)] = {};  // lanes past n stay zero
       for (int l = 0; l < n; ++l) {
         const std::size_t v = std::size_t(v0 + l);
-        for (std::uint64_t m = bins_.pair_offset[v]; m < bins_.pair_offset[v + 1]; ++m) {
-          if (m + kRecordPrefetch < M) {
-            const S* ahead = records_.data() + bins_.pair_slot[m + kRecordPrefetch] * std::uint64_t(R);
-            __builtin_prefetch(ahead);
-            __builtin_prefetch(ahead + R - 1);  // a record may straddle two cache lines
-          }
-          const std::uint64_t slot = bins_.pair_slot[m];
-          const S* rec = records_.data() + slot * std::uint64_t(R);
+        const S* rec = records_.data() + bins_.pair_offset[v] * std::uint64_t(R);  // in pair order
+        for (std::uint64_t m = bins_.pair_offset[v]; m < bins_.pair_offset[v + 1]; ++m, rec += R)
           for (int k = 0; k < R; ++k) acc[l][k] += double(rec[k]);
-        }
       }
       const std::uint32_t hard = backward_batch<D>(model, ids, n, acc, grads, colour);
       if constexpr (Opt.single_precision)
@@ -552,6 +544,17 @@ class Rasterizer {
     std::stable_sort(tile_order_.begin(), tile_order_.end(), [off](int a, int b) {
       return off[a + 1] - off[a] > off[b + 1] - off[b];
     });
+  }
+
+  /// Fill the gradient records with zeros, in parallel over fixed chunks (each thread first
+  /// touches and streams its own part).
+  void zero_records() {
+    const std::size_t n = records_.size();
+    const int chunks = detail::fixed_chunks(n);
+    S* r = records_.data();
+#pragma omp parallel for schedule(static)
+    for (int k = 0; k < chunks; ++k)
+      std::fill(r + n * std::size_t(k) / std::size_t(chunks), r + n * std::size_t(k + 1) / std::size_t(chunks), S(0));
   }
 
   /// Zero every gradient of a culled Gaussian (the reduction writes the visible rows, all
