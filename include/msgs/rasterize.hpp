@@ -683,7 +683,7 @@ class Rasterizer {
   detail::OverwriteVector<std::uint16_t> block_mask_;  // [M] tile blocks each intersection blended into
   std::uint64_t fragments_ = 0;
   std::vector<int> tile_order_;        // [tiles] the blend passes' order (order_tiles)
-  detail::OverwriteVector<S> records_;  // [M, BlendRecord<depth, absgrad>::size(count)]
+  detail::OverwriteVector<S> records_;  // [M, BlendRecord<depth, absgrad>::size(count)] in pair order (Binning::pair_index)
   std::vector<S> bg_partial_;          // [tiles, count]
 };
 
