@@ -53,6 +53,13 @@ struct BlendConstants {
 
 namespace detail {
 
+/// Prefetches the cache lines of one object (a Splat is 48 bytes: half of them straddle two lines).
+template <class T>
+inline void prefetch_object(const T* p) {
+  __builtin_prefetch(p);
+  __builtin_prefetch(reinterpret_cast<const char*>(p) + sizeof(T) - 1);
+}
+
 /// Prefetches for writing the cache lines of the n elements at p.
 template <class T>
 inline void prefetch_for_write(T* p, std::size_t n) {
@@ -343,7 +350,7 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
     }
     if (j + kPrefetchDistance < end) {
       const std::uint32_t gp = list[j + kPrefetchDistance];
-      __builtin_prefetch(in.splats + gp);
+      detail::prefetch_object(in.splats + gp);
       __builtin_prefetch(in.colours + std::size_t(gp) * std::size_t(nc));
     }
     const std::uint32_t g = list[j];
@@ -378,7 +385,7 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
         const int q = b * NH + h;
         sig[n] = sg.at(centres, bx, by, h);
         item[n] = std::uint8_t(q);
-        n += int(detail::any_lane((sig[n] <= sigma_cut) & (T[q] > zero)));
+        n += int(detail::any_le_and_gt(sig[n], sigma_cut, T[q], zero));
       }
     }
     // Pass 2: the alpha of every listed chunk, in a loop of its own (detail::listed_alphas).
@@ -531,7 +538,7 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
   for (std::uint64_t jr = begin + max_last; jr-- > begin;) {
     if (jr >= begin + kPrefetchDistance) {
       const std::uint32_t gp = list[jr - kPrefetchDistance];
-      __builtin_prefetch(in.splats + gp);
+      detail::prefetch_object(in.splats + gp);
       __builtin_prefetch(in.colours + std::size_t(gp) * std::size_t(nc));
     }
     if (jr >= begin + kRecordPrefetchDistance && block_mask[jr - kRecordPrefetchDistance] != 0) {

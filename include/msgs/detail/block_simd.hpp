@@ -92,6 +92,20 @@ inline bool any_lane(const M& m) {
   return lane_bits(m) != 0;
 }
 
+/// Is there a lane where a <= b and c > d (both false at NaN)? With AVX-512 the two comparisons
+/// stay in mask registers: the generic form turns the first mask into a vector and back.
+template <class V>
+inline bool any_le_and_gt(const V& a, const V& b, const V& c, const V& d) {
+#if defined(__AVX512F__)
+  if constexpr (sizeof(V) == 64 && sizeof(a[0]) == 4) {
+    const __m512 va = std::bit_cast<__m512>(a), vb = std::bit_cast<__m512>(b), vc = std::bit_cast<__m512>(c),
+                 vd = std::bit_cast<__m512>(d);
+    return _mm512_mask_cmp_ps_mask(_mm512_cmp_ps_mask(vc, vd, _CMP_GT_OQ), va, vb, _CMP_LE_OQ) != 0;
+  }
+#endif
+  return any_lane((a <= b) & (c > d));
+}
+
 /// out = |v| lane by lane (clears the sign bits).
 template <class V>
 inline void abs_into(V& out, const V& v) {
@@ -119,9 +133,11 @@ inline void halve_to_four(const Vv& v, S* out4) {
 /// sum[l] = the sum of the 16 lanes of group l (one block's worth of an accumulator), stored as kChunks vectors at v[l * kChunks ...],
 /// for l < n. The summation tree is fixed (lane i plus lane i + 8, then i + 4, then
 /// (0 + 2) + (1 + 3)), the same for every vector width, so a group sums to the same bits with
-/// AVX-512, AVX or SSE.
+/// AVX-512, AVX or SSE. Always inlined: called out of line (as GCC chose), the accumulators it
+/// reads had to live in memory throughout the blend backward's loop, a store and a load each per
+/// chunk, and each call cost a vzeroupper.
 template <class S, class V>
-inline void sum_rows(const V* v, int n, S* sum) {
+[[gnu::always_inline]] inline void sum_rows(const V* v, int n, S* sum) {
   constexpr int NH = BlockVec<S>::kChunks, L = BlockVec<S>::kLanes;
   if constexpr (L == 16 && NH == 1) {
     // One 16-lane vector per row: reduce four rows at a time with shuffles that pack the partial
