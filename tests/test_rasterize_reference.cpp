@@ -240,7 +240,7 @@ TEST_CASE("exp_neg_into: within 2 ulp of exp on [0, 87]; negative -> 1, NaN -> e
   }
 }
 
-TEST_CASE("sum_rows, lane_bits, min_into and max_into match their scalar definitions") {
+TEST_CASE("sum_rows, lane_bits, any_le_and_gt, min_into and max_into match their scalar definitions") {
   using RV = detail::BlockVec<float>;
   using V = RV::V;
   using M = RV::M;
@@ -279,6 +279,22 @@ TEST_CASE("sum_rows, lane_bits, min_into and max_into match their scalar definit
     bits_ref |= std::uint32_t(m[i] != 0) << i;
   }
   CHECK(detail::lane_bits(m) == bits_ref);
+  // any_le_and_gt: true iff some lane has a <= b and c > d, NaN comparing false, whichever lane it is.
+  for (int hit = -1; hit < L; ++hit)
+    for (int nan_lane = -1; nan_lane < L; ++nan_lane) {
+      V x, y, c, d;
+      for (int i = 0; i < L; ++i) {
+        x[i] = i == hit ? 1.0f : 2.0f;  // x <= y in the hit lane only
+        y[i] = 1.0f;
+        c[i] = (i == hit || i % 2 == 0) ? 0.5f : -0.5f;  // c > d in the hit lane and every even lane
+        d[i] = 0.0f;
+      }
+      if (nan_lane >= 0) (nan_lane % 2 == 0 ? x : c)[nan_lane] = NAN;
+      bool ref = false;
+      for (int i = 0; i < L; ++i) ref = ref || (x[i] <= y[i] && c[i] > d[i]);
+      CHECK(detail::any_le_and_gt(x, y, c, d) == ref);
+      CHECK(ref == (hit >= 0 && hit != nan_lane));
+    }
 }
 
 TEST_CASE("projection exp and log (lexp, llog): within 1 ulp of libm, the same bits per lane and one at a time") {
