@@ -210,9 +210,9 @@ int run_train(const std::vector<std::string>& argv) {
   for (const auto& [k, n] : res.gaussians) std::printf(" %s %zu", k.c_str(), n);
   const auto& t = res.times;
   std::printf("\ntime (s): project %.1f  bin %.1f  blend %.1f  loss %.1f  backward %.1f (blend %.1f, Gaussians %.1f)  adam %.1f  "
-              "densify %.1f  load %.1f  eval %.1f\n",
+              "densify %.1f (refine %.1f)  load %.1f  eval %.1f\n",
               t.project, t.bin, t.blend, t.loss, t.backward, t.backward_blend, t.backward_gaussians, t.adam, t.densify,
-              t.load, t.eval);
+              t.refine, t.load, t.eval);
   for (const auto& [model, e] : res.exposure_params) {
     double gmin = 1e300, gmax = -1e300;
     for (const auto& g : e.gain)

@@ -103,7 +103,7 @@ inline nlohmann::json metrics_json(const std::vector<BandMetrics>& metrics) {
 inline nlohmann::json times_json(const StageTimes& t) {
   return {{"load", t.load}, {"project", t.project}, {"bin", t.bin}, {"blend", t.blend}, {"loss", t.loss},
           {"backward", t.backward}, {"backward_blend", t.backward_blend}, {"backward_gaussians", t.backward_gaussians},
-          {"adam", t.adam}, {"densify", t.densify}, {"eval", t.eval}, {"total", t.total()}};
+          {"adam", t.adam}, {"densify", t.densify}, {"refine", t.refine}, {"eval", t.eval}, {"total", t.total()}};
 }
 
 inline nlohmann::json plan_json(const TrainPlan& p) {

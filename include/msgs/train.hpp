@@ -57,11 +57,14 @@ struct StageTimes {
   /// projection and colour backward (the rest of `backward` is the clamp, exposure and scale
   /// regulariser).
   double backward_blend = 0, backward_gaussians = 0;
+  /// Part of `densify`: the refinements (growth, pruning and the moves of model and moments); the
+  /// rest is the per-step gradient statistics.
+  double refine = 0;
   double total() const { return load + project + bin + blend + loss + backward + adam + densify + eval; }
   StageTimes& operator+=(const StageTimes& o) {
     load += o.load; project += o.project; bin += o.bin; blend += o.blend; loss += o.loss;
     backward += o.backward; adam += o.adam; densify += o.densify; eval += o.eval;
-    backward_blend += o.backward_blend; backward_gaussians += o.backward_gaussians;
+    backward_blend += o.backward_blend; backward_gaussians += o.backward_gaussians; refine += o.refine;
     return *this;
   }
 };
@@ -517,10 +520,12 @@ class Trainer {
       // 6. Adaptive density control.
       if (ctx.observe_density && density_.accumulates_at(step))
         density_.observe_gradients(step, bi, grads, raster.radii(), cam.width, cam.height, &seen);
+      const auto t5s = clock::now();
       const DensifyReport rep = density_.step_post_backward(step, model_, adam_.exp_avg, adam_.exp_avg_sq);
       if (rep.refined || rep.opacity_reset) last_rep = rep;
       auto t6 = clock::now();
       times_.densify += seconds(t5, t6);
+      if (rep.refined) times_.refine += seconds(t5s, t6);
 
       if (opt_.check_finite) check_finite(step);
       if (opt_.on_step) {  // off the training clock, like anytime evaluations
