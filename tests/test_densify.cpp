@@ -449,6 +449,7 @@ TEST_CASE("prune by opacity (0.1 MSAD, 0.005 default) and by 3-D size after the 
   ref.log_scales[9] = float(std::log(0.3));     // g3: between 0.1 and 0.5
   ref.means[12] = std::numeric_limits<float>::quiet_NaN();  // g4: broken row
   auto pruned_rows = [&](DensifyConfig cfg, long long step) {
+    cfg.reorder_every = 0;  // gsplat's row order: the survivors in order
     DensityControl dc(cfg, 1, 0);
     Model m = ref;
     RefineCounts c;
@@ -491,7 +492,9 @@ TEST_CASE("a row with a non-finite value in any array or band plane is pruned, i
   }
   mark(n - 1, &m.sh_at(n - 1, 1, G::bands - 1), nan);
   std::sort(broken.begin(), broken.end());
-  DensityControl dc(DensifyConfig::gsplat_default(), 1, 0);
+  DensifyConfig cfg = DensifyConfig::gsplat_default();
+  cfg.reorder_every = 0;  // gsplat's row order: the survivors in order
+  DensityControl dc(cfg, 1, 0);
   RefineCounts c;
   const RefinePlan plan = dc.refine(600, m, c);  // no statistics: nothing grows, only pruning
   CHECK(c.pruned == broken.size());
@@ -513,6 +516,7 @@ TEST_CASE("screen-space split and prune apply only until screen_stop") {
   DensifyConfig cfg = DensifyConfig::msad();
   cfg.refine_every = 100;
   cfg.reset_every = 3000;
+  cfg.reorder_every = 0;  // gsplat's row order: survivors, then samples
   const int W = 1000, H = 500;
   auto refine_at = [&](long long step, RefineCounts& c) {
     DensityControl dc(cfg, 1, 0);
@@ -546,7 +550,9 @@ TEST_CASE("optimiser state rows follow the refine plan with zeros for fresh rows
   for (auto& v : exp_avg_sq.means) v += 0.5f;  // distinguish the two states
   const Model ref_avg = exp_avg, ref_sq = exp_avg_sq;
 
-  DensityControl dc(DensifyConfig::msad(), 2, 0);
+  DensifyConfig cfg = DensifyConfig::msad();
+  cfg.reorder_every = 0;  // gsplat's row order: survivors, copies, samples
+  DensityControl dc(cfg, 2, 0);
   // g0 (small) and g1 (large) have a high gradient in band 1. (Distinct values on purpose: GCC 12.2
   // with -mavx512f folds the constant {a, a, 0, 0} into a broadcast {a, a, a, a}, a wrong-code bug.)
   dc.observe(600, 1, grads_with_ndc_norm({0.01, 0.012, 0.0, 0.0}, 64).absgrad, radii_all(4, 1), 64, 64);
@@ -579,6 +585,144 @@ TEST_CASE("optimiser state rows follow the refine plan with zeros for fresh rows
   dc2.observe(600, 0, grads_with_ndc_norm({0.01, 0.01, 0.01}, 64).absgrad, radii_all(3, 1), 64, 64);
   CHECK_THROWS_AS(dc2.step_post_backward(600, m2, bad_state), std::invalid_argument);
   CHECK(m2.size() == 3);
+}
+
+TEST_CASE("between spatial sorts, survivors keep their rows and new Gaussians take the rows of removed ones") {
+  // The refinement of the test above in the default order (reorder_every 8; step 600 does not sort).
+  Model m = make_model(4);
+  m.log_scales[3] = float(std::log(0.05));   // g1 large -> split
+  m.opacity_logits[3] = float(logit(0.01));  // g3 faint -> pruned
+  const Model ref = m;
+  Model exp_avg = make_model(4), exp_avg_sq = make_model(4);
+  for (auto& v : exp_avg_sq.means) v += 0.5f;
+  const Model ref_avg = exp_avg, ref_sq = exp_avg_sq;
+  DensityControl dc(DensifyConfig::msad(), 2, 0);
+  REQUIRE_FALSE(dc.reorders_at(600));
+  dc.observe(600, 1, grads_with_ndc_norm({0.01, 0.012, 0.0, 0.0}, 64).absgrad, radii_all(4, 1), 64, 64);
+  const DensifyReport rep = dc.step_post_backward(600, m, exp_avg, exp_avg_sq);
+  REQUIRE(rep.after == 5);
+  // g0 and g2 stay in rows 0 and 2; the copy of g0 and the samples of g1 fill rows 1 and 3 (those
+  // of g1 and g3) and row 4.
+  CHECK(rep.plan.source == std::vector<std::uint32_t>{0, 0, 2, 1, 1});
+  CHECK(rep.plan.fresh == std::vector<bool>{false, true, false, true, true});
+  for (std::size_t i = 0; i < 5; ++i) {
+    if (rep.plan.fresh[i]) {
+      CHECK(row_is_zero(exp_avg, i));
+      CHECK(row_is_zero(exp_avg_sq, i));
+    } else {
+      CHECK(same_row(exp_avg, i, ref_avg, rep.plan.source[i]));
+      CHECK(same_row(exp_avg_sq, i, ref_sq, rep.plan.source[i]));
+      CHECK(same_row(m, i, ref, rep.plan.source[i]));
+    }
+  }
+  CHECK(same_row(m, 1, ref, 0));  // the copy
+  // The samples: the parent's colour and rotation, their own means and smaller scales.
+  for (std::size_t i : {std::size_t(3), std::size_t(4)}) {
+    CHECK(m.sh_at(i, 1, 5) == ref.sh_at(1, 1, 5));
+    CHECK(m.log_scales[3 * i] == doctest::Approx(ref.log_scales[3] - std::log(1.6)).epsilon(1e-5));
+  }
+}
+
+TEST_CASE("Gaussians with the same mean keep their order when rows are filled (they blend in row order)") {
+  // g1 and g3 share a mean (a copy and its source that have not moved). Pruning g0 frees row 0;
+  // g3 lies past the end (3 rows remain) and must move, but not in front of g1: the pair blends
+  // in row order at its common depth, and the two rows' optimiser states differ.
+  Model m = make_model(4);
+  for (int a = 0; a < 3; ++a) m.means[3 * 3 + a] = m.means[3 * 1 + a];
+  m.sh_at(3, 0, 2) = 12345.0f;  // tell them apart
+  m.opacity_logits[0] = float(logit(0.01));  // g0 faint -> pruned
+  const Model ref = m;
+  DensityControl dc(DensifyConfig::msad(), 1, 0);
+  REQUIRE_FALSE(dc.reorders_at(600));
+  RefineCounts c;
+  const RefinePlan plan = dc.refine(600, m, c);
+  CHECK(c.pruned == 1);
+  CHECK(plan.source == std::vector<std::uint32_t>{1, 3, 2});  // g3 takes g1's row, g1 the free row 0
+  for (std::size_t i = 0; i < 3; ++i) CHECK(same_row(m, i, ref, plan.source[i]));
+  // Without the tie, the row past the end simply fills the free row.
+  Model u = make_model(4);
+  u.opacity_logits[0] = float(logit(0.01));
+  DensityControl du(DensifyConfig::msad(), 1, 0);
+  CHECK(du.refine(600, u, c).source == std::vector<std::uint32_t>{3, 1, 2});
+}
+
+TEST_CASE("band planes with room to grow: in-place refinement, growth by a quarter, zero spare rows") {
+  // A model whose planes have room for 10 Gaussians and hold 6.
+  Model m = make_model(6);
+  {
+    std::vector<float> planes(10 * std::size_t(G::sh_floats), 0.0f);
+    for (int c = 0; c < G::bands; ++c)
+      std::copy_n(m.sh_row(0, c), 6 * G::sh_coeffs, planes.data() + std::size_t(c) * 10 * G::sh_coeffs);
+    m.sh.swap(planes);
+  }
+  REQUIRE(m.sh_capacity() == 10);
+  m.check_consistent();
+  const Model six = make_model(6);
+  for (std::size_t i = 0; i < 6; ++i) CHECK(same_row(m, i, six, i));
+  auto spare_rows_zero = [](const Model& x) {
+    for (int c = 0; c < G::bands; ++c)
+      for (std::size_t i = x.size(); i < x.sh_capacity(); ++i)
+        for (int k = 0; k < G::sh_coeffs; ++k)
+          if (x.sh_row(i, c)[k] != 0.0f) return false;
+    return true;
+  };
+  // Few rows change (row 2 removed, its place taken by a copy of row 4, a copy of row 0 appended):
+  // in place, the capacity stays.
+  RefinePlan p;
+  p.input_size = 6;
+  p.source = {0, 1, 4, 3, 4, 5, 0};
+  p.fresh = {false, false, true, false, false, false, true};
+  std::vector<float> spare;
+  Model a = m, state = m;
+  apply(p, a, spare);
+  apply_zero_fresh(p, state, spare);
+  CHECK(a.sh_capacity() == 10);
+  REQUIRE(a.size() == 7);
+  for (std::size_t i = 0; i < 7; ++i) {
+    CHECK(same_row(a, i, six, p.source[i]));
+    if (p.fresh[i]) CHECK(row_is_zero(state, i));
+    else CHECK(same_row(state, i, six, p.source[i]));
+  }
+  CHECK(spare_rows_zero(a));
+  // Shrinking in place zeroes the rows left behind.
+  RefinePlan shrink;
+  shrink.input_size = 7;
+  shrink.source = {0, 1, 2, 3, 4};
+  shrink.fresh.assign(5, false);
+  apply(shrink, a, spare);
+  CHECK(a.sh_capacity() == 10);
+  CHECK(spare_rows_zero(a));
+  // Growing past the capacity gathers into planes with room for a quarter more.
+  const RefinePlan grow = RefinePlan::append(5, 7);
+  const Model before = a;
+  apply(grow, a, spare);
+  REQUIRE(a.size() == 12);
+  CHECK(a.sh_capacity() == 15);
+  for (std::size_t i = 0; i < 5; ++i) CHECK(same_row(a, i, before, i));
+  for (std::size_t i = 5; i < 12; ++i) CHECK(row_is_zero(a, i));
+  CHECK(spare_rows_zero(a));
+  // The same plans without a spare, and through apply_rows of a model of exact planes, agree.
+  Model b = m;
+  apply(p, b);
+  apply(shrink, b);
+  apply(grow, b);
+  REQUIRE(b.size() == 12);
+  for (std::size_t i = 0; i < 12; ++i) CHECK(same_row(b, i, a, i));
+  // A copy with exact planes, as checkpoints and PLY files hold them; resize keeps the values.
+  Model exact;
+  exact.assign_shrunk(a);
+  CHECK(exact.sh_capacity() == 12);
+  CHECK(exact.sh.size() == 12 * std::size_t(G::sh_floats));
+  for (std::size_t i = 0; i < 12; ++i) CHECK(same_row(exact, i, a, i));
+  Model r = a;
+  r.resize(13);
+  CHECK(r.sh_capacity() == 13);
+  for (std::size_t i = 0; i < 12; ++i) CHECK(same_row(r, i, a, i));
+  CHECK(row_is_zero(r, 12));
+  // Planes too small for the Gaussians are refused.
+  Model bad = make_model(3);
+  bad.sh.resize(2 * std::size_t(G::sh_floats));
+  CHECK_THROWS_AS(bad.check_consistent(), std::invalid_argument);
 }
 
 TEST_CASE("opacity reset clamps opacities and zeroes the opacity moments") {

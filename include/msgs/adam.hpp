@@ -241,7 +241,6 @@ class Adam {
     cs.count_ = count;
     cs.rows_ = params.size();
     cs.betas_ = betas();
-    const std::size_t stride = params.sh_plane_stride();
     for (int c = first; c < first + count; ++c) {
       const std::int64_t t = ++steps.sh[static_cast<std::size_t>(c)];
       const Coeffs dc = coeffs(config.lr_sh_dc, t), rest = coeffs(config.lr_sh_rest, t);
@@ -250,10 +249,9 @@ class Adam {
       ch.inv.fill(rest.inv_bc2_sqrt);
       ch.step_size[0] = dc.step_size;
       ch.inv[0] = dc.inv_bc2_sqrt;
-      const std::size_t off = std::size_t(c) * stride;
-      ch.p = params.sh.data() + off;
-      ch.m = exp_avg.sh.data() + off;
-      ch.v = exp_avg_sq.sh.data() + off;
+      ch.p = params.sh_row(0, c);  // each array's own plane stride (their capacities may differ)
+      ch.m = exp_avg.sh_row(0, c);
+      ch.v = exp_avg_sq.sh_row(0, c);
     }
     return cs;
   }
@@ -404,10 +402,9 @@ class Adam {
                  const std::vector<std::uint32_t>* rows, Unlisted unlisted) {
     constexpr int K = G::sh_coeffs;
     const ColourStep cs = begin_colour(params, first, count);
-    const std::size_t stride = params.sh_plane_stride();
     for (int i = 0; i < count; ++i) {
       const auto& ch = cs.channels_[static_cast<std::size_t>(i)];
-      const S* g = grad.sh.data() + std::size_t(first + i) * stride;
+      const S* g = grad.sh_row(0, first + i);
       for_each_run(params.size(), rows, unlisted, [&](std::size_t row, std::size_t n, bool listed) {
         const std::size_t o = row * K;
         if (listed) update_rows<K>(ch.p + o, ch.m + o, ch.v + o, g + o, n, cs.betas_, ch.step_size.data(), ch.inv.data());

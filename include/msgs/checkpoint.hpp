@@ -81,8 +81,9 @@ class CkptWriter {
   template <class T>
   void vec(const std::vector<T>& v) {
     pod(std::uint64_t(v.size()));
-    if (!v.empty()) out_.write(reinterpret_cast<const char*>(v.data()), std::streamsize(v.size() * sizeof(T)));
+    if (!v.empty()) bytes(v.data(), v.size() * sizeof(T));
   }
+  void bytes(const void* p, std::size_t n) { out_.write(static_cast<const char*>(p), std::streamsize(n)); }
 
  private:
   std::ostream& out_;
@@ -135,7 +136,12 @@ class CkptReader {
 
 template <class G>
 void write_model(CkptWriter& w, const GaussianModel<G, float>& m) {
-  w.vec(m.means); w.vec(m.log_scales); w.vec(m.quats); w.vec(m.opacity_logits); w.vec(m.sh);
+  w.vec(m.means); w.vec(m.log_scales); w.vec(m.quats); w.vec(m.opacity_logits);
+  // The band planes with N rows each, whatever their capacity: [Bands, N, K].
+  const std::size_t n = m.size(), K = std::size_t(G::sh_coeffs);
+  w.pod(std::uint64_t(n * std::size_t(G::sh_floats)));
+  for (int c = 0; c < G::bands; ++c)
+    if (n > 0) w.bytes(m.sh_row(0, c), n * K * sizeof(float));
 }
 
 /// `sh_interleaved`: a version-1 file, SH [N, K, Bands].

@@ -302,28 +302,29 @@ inline void stream_fence() {
 #endif
 }
 
-/// Apply `plan` to `rows` (`planes` planes of plan.input_size rows of `width` values) out of place:
-/// every output row is gathered into `spare` in one parallel pass (each kept row read once, each
-/// output row written once; the planes change stride on the way), then `rows` and `spare` swap, so
-/// that `spare` holds the old values' memory for the next array of the same shape. Reusing that
-/// memory from one refinement to the next spares the page faults of a fresh allocation; headroom of
-/// a half is reserved when it grows (resize_for_overwrite). The values are those of apply_rows_impl.
+/// Apply `plan` to `rows` (`planes` planes of `in_cap` >= plan.input_size rows of `width` values)
+/// out of place: every output row is gathered into `spare`, planes of `out_cap` >= plan.size() rows
+/// (rows past plan.size() zero), in one parallel pass (each kept row read once, each output row
+/// written once; the planes change stride on the way), then `rows` and `spare` swap, so that
+/// `spare` holds the old values' memory for the next array of the same shape. Reusing that memory
+/// from one refinement to the next spares the page faults of a fresh allocation; headroom of a
+/// half is reserved when it grows (resize_for_overwrite). The values are those of apply_rows_impl.
 template <class T>
 void gather_rows(const RefinePlan& plan, std::vector<T>& rows, std::vector<T>& spare, std::size_t width,
-                 std::size_t planes, bool zero_fresh, const char* what) {
+                 std::size_t planes, bool zero_fresh, const char* what, std::size_t in_cap, std::size_t out_cap) {
   const std::size_t n = plan.input_size, m = plan.size(), w = width;
-  if (rows.size() != planes * n * w)
+  if (rows.size() != planes * in_cap * w || in_cap < n || out_cap < m)
     throw std::invalid_argument(std::string(what) + ": array has " + std::to_string(rows.size()) + " values, plan expects " +
                                 std::to_string(planes) + " x " + std::to_string(n) + " rows of " +
                                 std::to_string(width));
-  resize_for_overwrite(spare, planes * m * w);  // nothing to keep: no copy into a new block
+  resize_for_overwrite(spare, planes * out_cap * w);  // nothing to keep: no copy into a new block
   const std::ptrdiff_t sm = static_cast<std::ptrdiff_t>(m);
   const std::uint32_t* source = plan.source.data();
 #pragma omp parallel
   {
     for (std::size_t q = 0; q < planes; ++q) {
-      const T* from = rows.data() + q * n * w;
-      T* to = spare.data() + q * m * w;
+      const T* from = rows.data() + q * in_cap * w;
+      T* to = spare.data() + q * out_cap * w;
 #pragma omp for schedule(static, 1024) nowait  // the planes are disjoint: no barrier between them
       for (std::ptrdiff_t ff = 0; ff < sm; ++ff) {
         const std::size_t f = static_cast<std::size_t>(ff);
@@ -334,7 +335,75 @@ void gather_rows(const RefinePlan& plan, std::vector<T>& rows, std::vector<T>& s
     }
     stream_fence();  // before the region's closing barrier: every thread's rows are in place after it
   }
+  if (out_cap > m)
+    for (std::size_t q = 0; q < planes; ++q) std::fill_n(spare.data() + (q * out_cap + m) * w, (out_cap - m) * w, T(0));
   rows.swap(spare);
+}
+
+template <class T>
+void gather_rows(const RefinePlan& plan, std::vector<T>& rows, std::vector<T>& spare, std::size_t width,
+                 std::size_t planes, bool zero_fresh, const char* what) {
+  gather_rows(plan, rows, spare, width, planes, zero_fresh, what, plan.input_size, plan.size());
+}
+
+/// The output rows of `plan` that change, ascending: those that are not a copy of the row already
+/// at their index (with `zero_fresh`, new Gaussians' rows change too: their state starts at zero).
+inline std::vector<std::uint32_t> changed_rows(const RefinePlan& plan, bool zero_fresh) {
+  std::vector<std::uint32_t> out;
+  for (std::size_t f = 0; f < plan.size(); ++f)
+    if (plan.source[f] != f || (zero_fresh && plan.fresh[f])) out.push_back(std::uint32_t(f));
+  return out;
+}
+
+/// Apply `plan` to `rows` in place, writing only the output rows `changed` (changed_rows), each
+/// copied straight from its source, except a source that is itself the place of a changed row (the
+/// row of a split Gaussian that its samples copy): those are read into a buffer before any row is
+/// written. `planes` planes of `cap` rows (cap >= both sizes, unchanged: the planes do not move),
+/// or one plane that is resized to plan.size() rows. Rows a shrinking plan leaves behind in a plane
+/// are zeroed. The cost is that of the changed rows, not of the array.
+template <class T>
+void apply_changed_rows(const RefinePlan& plan, const std::vector<std::uint32_t>& changed, std::vector<T>& rows,
+                        std::size_t width, std::size_t planes, std::size_t cap, bool zero_fresh) {
+  const std::size_t n = plan.input_size, m = plan.size(), w = width, c = changed.size();
+  const std::size_t in_stride = planes == 1 ? n : cap, out_stride = planes == 1 ? m : cap;
+  // Sources that are also written, and the changed rows that read them.
+  std::vector<std::uint8_t> written(std::max(n, m), 0);
+  for (const std::uint32_t f : changed) written[f] = 1;
+  std::vector<std::uint32_t> hazard;  // indices j into `changed`
+  for (std::size_t j = 0; j < c; ++j) {
+    const std::size_t f = changed[j];
+    const std::uint32_t s = plan.source[f];
+    if (s != RefinePlan::none && !(zero_fresh && plan.fresh[f]) && written[s]) hazard.push_back(std::uint32_t(j));
+  }
+  std::vector<T> staged(planes * hazard.size() * w);
+  for (std::size_t h = 0; h < hazard.size(); ++h)
+    for (std::size_t q = 0; q < planes; ++q)
+      std::copy_n(rows.data() + (q * in_stride + plan.source[changed[hazard[h]]]) * w, w, staged.data() + (q * hazard.size() + h) * w);
+  if (planes == 1 && m > n) {  // room first (the old rows stay where they are)
+    if (m * w > rows.capacity()) rows.reserve(m * w + m * w / 4);  // room for later growth
+    rows.resize(m * w);
+  }
+  // Every other changed row straight from its source: no source of these is written here.
+  const std::ptrdiff_t sc = static_cast<std::ptrdiff_t>(c);
+  const bool parallel = c * planes * w > 16384;
+#pragma omp parallel for schedule(static, 256) if (parallel)
+  for (std::ptrdiff_t jj = 0; jj < sc; ++jj) {
+    const std::size_t f = changed[std::size_t(jj)];
+    const std::uint32_t s = plan.source[f];
+    const bool zero = s == RefinePlan::none || (zero_fresh && plan.fresh[f]);
+    if (!zero && written[s]) continue;  // staged
+    for (std::size_t q = 0; q < planes; ++q) {
+      T* to = rows.data() + (q * out_stride + f) * w;
+      if (zero) std::fill_n(to, w, T(0));
+      else std::copy_n(rows.data() + (q * in_stride + s) * w, w, to);
+    }
+  }
+  for (std::size_t h = 0; h < hazard.size(); ++h)
+    for (std::size_t q = 0; q < planes; ++q)
+      std::copy_n(staged.data() + (q * hazard.size() + h) * w, w, rows.data() + (q * out_stride + changed[hazard[h]]) * w);
+  if (planes == 1) rows.resize(m * w);  // shrinking: after the rows past the end were read
+  else if (m < n)
+    for (std::size_t q = 0; q < planes; ++q) std::fill_n(rows.data() + (q * cap + m) * w, (n - m) * w, T(0));
 }
 
 /// Calls f(array, row width, planes) for every per-Gaussian array of a model (SH: one plane per band).
@@ -357,19 +426,37 @@ struct GeometrySpares {
 };
 
 /// Apply `plan` to every array of a model or of optimiser state in the model's layout: fresh rows
-/// zero with `zero_fresh`; with a `spare`, the band planes gathered out of place through it
-/// (gather_rows); with `geometry`, the other arrays too (in parallel, where the in-place move of
-/// apply_rows_impl is one thread's memmove), else they move in place.
+/// zero with `zero_fresh`. When few rows change (a refinement that keeps the surviving Gaussians in
+/// their rows and puts new ones into the rows of removed ones) and the band planes have room for
+/// the result, only those rows are written (apply_changed_rows). Otherwise with a `spare`, the band
+/// planes are gathered out of place through it (gather_rows), their capacity grown by a quarter
+/// when the result does not fit; with `geometry`, the other arrays too (in parallel, where the
+/// in-place move of apply_rows_impl is one thread's memmove), else they move in place.
 template <class G, class S>
 void apply_arrays(const RefinePlan& plan, GaussianModel<G, S>& m, bool zero_fresh,
                   std::type_identity_t<std::vector<S>>* spare, const char* what,
                   GeometrySpares<std::type_identity_t<S>>* geometry = nullptr) {
   m.check_consistent();
   plan.validate();
+  const std::size_t rows_out = plan.size(), cap = m.sh_capacity();
+  const std::vector<std::uint32_t> changed = changed_rows(plan, zero_fresh);
+  const bool few = changed.size() * 2 <= rows_out;
   for_each_array(m, [&](auto& v, std::size_t w, std::size_t planes) {
-    if (spare && &v == &m.sh) gather_rows(plan, v, *spare, w, planes, zero_fresh, what);
-    else if (geometry && &v != &m.sh) gather_rows(plan, v, geometry->of_width(w), w, planes, zero_fresh, what);
-    else apply_rows_impl(plan, v, w, zero_fresh, what, planes, true);
+    const bool sh = &v == &m.sh;
+    const std::size_t in_cap = sh ? cap : plan.input_size;
+    if (few && (planes == 1 || rows_out <= in_cap)) {
+      apply_changed_rows(plan, changed, v, w, planes, in_cap, zero_fresh);
+      return;
+    }
+    if (sh && (spare || in_cap != plan.input_size)) {
+      const std::size_t out_cap = planes == 1 ? rows_out : rows_out <= in_cap ? in_cap : rows_out + rows_out / 4;
+      std::vector<S> temporary;
+      gather_rows(plan, v, spare ? *spare : temporary, w, planes, zero_fresh, what, in_cap, out_cap);
+    } else if (geometry && !sh) {
+      gather_rows(plan, v, geometry->of_width(w), w, planes, zero_fresh, what);
+    } else {
+      apply_rows_impl(plan, v, w, zero_fresh, what, planes, true);
+    }
   });
 }
 }  // namespace detail
@@ -480,8 +567,11 @@ struct DensifyConfig {
   /// Sort the Gaussians into spatial order (spatial_order.hpp) as part of every reorder_every-th
   /// refinement (steps that are multiples of reorder_every x refine_every) and of a refinement that
   /// no other follows within that span (the last before refine_stop or a pause), so that a view's
-  /// Gaussians are runs of consecutive rows; 0 = never (rows stay in gsplat's order: survivors,
-  /// then copies, then split samples). It moves rows and nothing else: split samples draw from the
+  /// Gaussians are runs of consecutive rows. The refinements in between keep every surviving
+  /// Gaussian in its row and put the new ones into the rows of removed ones (fill_removed_rows),
+  /// so that they write the rows that change, not the whole model and both moments.
+  /// 0 = never, and rows stay in gsplat's order (survivors, then copies, then split samples): every
+  /// refinement moves every row after the first removed one. It moves rows and nothing else: split samples draw from the
   /// parent's values (content_key), not its row, and the trainer's rasteriser orders Gaussians at
   /// equal depth by their means (RasterOptions::ties_by_mean), so a run with it holds the same
   /// Gaussians, bit for bit, as the run without, in another order (test_checkpoint). Counted in refinements, so that ScheduleScale leaves it
@@ -984,6 +1074,15 @@ class DensityControl {
       }
       const std::vector<std::uint32_t> order = order_by_code(morton_codes(out_mean.data(), m));
       for (std::size_t f = 0; f < m; ++f) grown_row[f] = p_prune.source[order[f]];
+    } else if (cfg_.reorder_every > 0) {
+      // Between the sorts the order is free (nothing depends on a row's place): every surviving
+      // Gaussian stays in its row, the new ones take the rows of the removed ones, and only what
+      // is left over moves to the end or into the remaining gaps. A refinement then writes the
+      // rows that change instead of every row of the model and of both moments.
+      const auto mean_of = [&](std::uint32_t r) {
+        return r < rest ? &model.means[3 * std::size_t(plan.source[r])] : &sample_mean[3 * (r - rest)];
+      };
+      grown_row = fill_removed_rows(grown_row, plan, rest, mean_of);
     }
     RefinePlan p_out = p_prune;  // the kept rows of the grown set, in output order
     p_out.source = grown_row;
@@ -1056,6 +1155,85 @@ class DensityControl {
         split[i] = false;
       }
     }
+  }
+
+  /// The kept rows of a grown set (`kept`, ascending rows of the set `grown` = p_dup.then(p_split),
+  /// whose first `rest` rows are the unsplit ones) in an output order that moves few rows: a
+  /// surviving Gaussian (not fresh, input row s) takes output row s when there is one; the rest
+  /// (new Gaussians, and survivors whose row is past the end) fill the free rows in ascending
+  /// order, in the order of `kept`.
+  ///
+  /// Gaussians whose means are bit-identical (a copy and its source until either moves) blend in
+  /// row order at their common depth (RasterOptions::ties_by_mean), and their optimiser states
+  /// differ: their order is the one thing a row's place decides. Within every such group the rows
+  /// are therefore handed out in the order of `kept`, which is the order gsplat's row order gives
+  /// them (a group's earlier rows keep their order in every refinement and in the stable spatial
+  /// sort). So the result holds the same Gaussians, bit for bit, as with gsplat's order.
+  /// `mean_of(r)`: the mean grown row r will have. A function of the plan and the means only, so
+  /// the thread count changes nothing.
+  template <class MeanOf>
+  static std::vector<std::uint32_t> fill_removed_rows(const std::vector<std::uint32_t>& kept, const RefinePlan& grown,
+                                                      std::size_t rest, const MeanOf& mean_of) {
+    const std::size_t m = kept.size();
+    std::vector<std::uint32_t> out(m, RefinePlan::none), movers;
+    for (const std::uint32_t r : kept) {
+      const std::uint32_t s = grown.source[r];
+      if (r < rest && !grown.fresh[r] && s < m) out[s] = r;
+      else movers.push_back(r);
+    }
+    std::size_t j = 0;
+    for (std::size_t f = 0; f < m; ++f)
+      if (out[f] == RefinePlan::none) out[f] = movers[j++];
+    // Groups of bit-identical means that hold a row that moved (only those can have changed their
+    // order): an open-addressing table of the movers' means, then one pass over every row.
+    using Mean = std::remove_cvref_t<decltype(*mean_of(0u))>;
+    constexpr std::size_t B = 3 * sizeof(Mean);
+    const auto hash = [](const Mean* p) {
+      unsigned char bytes[B];
+      std::memcpy(bytes, p, B);
+      std::uint64_t h = 0x6d73677368617368ULL;
+      for (std::size_t k = 0; k < B; k += 4) {
+        std::uint32_t word = 0;
+        std::memcpy(&word, bytes + k, 4);
+        h = (h ^ word) * 0x9e3779b97f4a7c15ULL;
+      }
+      return h ^ (h >> 29);
+    };
+    std::size_t slots = 16;
+    while (slots < 2 * movers.size()) slots *= 2;
+    std::vector<std::uint32_t> table(slots, RefinePlan::none);  // a mover's row per used slot
+    const auto find = [&](const Mean* p) {
+      std::size_t at = hash(p) & (slots - 1);
+      while (table[at] != RefinePlan::none && std::memcmp(mean_of(table[at]), p, B) != 0) at = (at + 1) & (slots - 1);
+      return at;
+    };
+    for (const std::uint32_t r : movers) {
+      const std::size_t at = find(mean_of(r));
+      if (table[at] == RefinePlan::none) table[at] = r;
+    }
+    // Members of each slot's group, in ascending output rows (a linked list through `next`).
+    std::vector<std::uint32_t> first(slots, RefinePlan::none), last(slots, RefinePlan::none), next(m, RefinePlan::none);
+    std::vector<std::uint32_t> used;  // slots with two or more members
+    for (std::size_t f = 0; f < m; ++f) {
+      const std::size_t at = find(mean_of(out[f]));
+      if (table[at] == RefinePlan::none) continue;
+      if (first[at] == RefinePlan::none) {
+        first[at] = std::uint32_t(f);
+      } else {
+        if (first[at] == last[at]) used.push_back(std::uint32_t(at));
+        next[last[at]] = std::uint32_t(f);
+      }
+      last[at] = std::uint32_t(f);
+    }
+    std::vector<std::uint32_t> group;
+    for (const std::uint32_t at : used) {  // the group's places, ascending, get its rows in order
+      group.clear();
+      for (std::uint32_t f = first[at]; f != RefinePlan::none; f = next[f]) group.push_back(out[f]);
+      std::sort(group.begin(), group.end());
+      std::size_t k = 0;
+      for (std::uint32_t f = first[at]; f != RefinePlan::none; f = next[f]) out[f] = group[k++];
+    }
+    return out;
   }
 
   bool paused_at(long long step) const { return cfg_.pause_begin < step && step <= cfg_.pause_end; }

@@ -118,12 +118,10 @@ ModelOf<3, G::sh_degree> pick_channels(const GaussianModel<G, float>& m, const s
   o.log_scales = m.log_scales;
   o.quats = m.quats;
   o.opacity_logits = m.opacity_logits;
-  const std::size_t plane = m.sh_plane_stride();  // band planes: a channel is one contiguous plane
-  for (int c = 0; c < 3; ++c) {
-    const auto first = m.sh.begin() + static_cast<std::ptrdiff_t>(std::size_t(pick[std::size_t(c)]) * plane);
-    std::copy(first, first + static_cast<std::ptrdiff_t>(plane),
-              o.sh.begin() + static_cast<std::ptrdiff_t>(std::size_t(c) * plane));
-  }
+  // Band planes: a channel is one contiguous run of N rows (the planes' capacities may differ).
+  const std::size_t values = m.size() * std::size_t(G::sh_coeffs);
+  for (int c = 0; c < 3; ++c)
+    if (values > 0) std::copy_n(m.sh_row(0, pick[std::size_t(c)]), values, o.sh_row(0, c));
   return o;
 }
 

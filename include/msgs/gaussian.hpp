@@ -49,9 +49,13 @@ template <class T> inline constexpr bool is_gaussian_v = is_gaussian<T>::value;
 /// N Gaussians of type `G` as structure of arrays, scalar type `S` (float for training, double
 /// for gradient checks). Storage conventions follow 3DGS: log-scales, wxyz quaternions (not
 /// necessarily normalised), opacity logits. SH coefficients are stored in band planes,
-/// [Bands, N, K]: plane c holds the K coefficients of channel c of every Gaussian, contiguous per
+/// [Bands, C, K]: plane c holds the K coefficients of channel c of every Gaussian, contiguous per
 /// Gaussian. A step that renders one band of a Joint model then reads and writes that plane only
 /// (in the model, its gradients and Adam's moments), never the cache lines of the other bands.
+/// A plane has room for C >= N Gaussians (sh_capacity(): sh.size() / sh_floats), so that
+/// densification can add Gaussians without moving every plane; the rows [N, C) of every plane are
+/// zero. A model assembled by hand with sh.size() == N x sh_floats has C = N. Read the planes
+/// through sh_row / sh_plane_stride, never as N x sh_floats values.
 template <class G, class S = float>
 struct GaussianModel {
   static_assert(is_gaussian_v<G>, "GaussianModel<G>: G must be msgs::Gaussian<Bands, SHDeg>");
@@ -67,32 +71,56 @@ struct GaussianModel {
   std::vector<S> sh;              ///< [Bands, N, K] SH coefficients in band planes, K = sh_coeffs
 
   GaussianModel() = default;
-  explicit GaussianModel(std::size_t n) { resize(n); }
+  explicit GaussianModel(std::size_t n)
+      : means(n * 3), log_scales(n * 3), quats(n * 4), opacity_logits(n), sh(n * static_cast<std::size_t>(G::sh_floats)) {}
 
   /// Number of Gaussians.
   std::size_t size() const { return opacity_logits.size(); }
   bool empty() const { return opacity_logits.empty(); }
 
   /// Resize every array to hold `n` Gaussians (new entries are zero; each band plane keeps its
-  /// first min(old, n) Gaussians).
+  /// first min(old, n) Gaussians). The planes end up with room for exactly `n` (sh_capacity() = n).
   void resize(std::size_t n) {
     const std::size_t old = size();
+    constexpr std::size_t K = static_cast<std::size_t>(G::sh_coeffs);
+    const bool planes_ok = old > 0 && sh.size() % static_cast<std::size_t>(G::sh_floats) == 0 && sh_capacity() >= old;
+    const std::size_t cap = planes_ok ? sh_capacity() : 0;
     means.resize(n * 3);
     log_scales.resize(n * 3);
     quats.resize(n * 4);
     opacity_logits.resize(n);
-    constexpr std::size_t K = static_cast<std::size_t>(G::sh_coeffs);
-    if (G::bands == 1 || old == 0 || sh.size() != old * static_cast<std::size_t>(G::sh_floats)) {
+    if (!planes_ok) {  // nothing to keep (or a model whose planes disagree with its size)
       if (G::bands > 1) sh.assign(n * static_cast<std::size_t>(G::sh_floats), S(0));
       else sh.resize(n * K);
       return;
     }
+    if (G::bands == 1) {  // one plane: rows [old, cap) are zero already
+      sh.resize(n * K);
+      return;
+    }
+    if (cap == n) return;
     std::vector<S> planes(n * static_cast<std::size_t>(G::sh_floats), S(0));
     const std::size_t keep = std::min(old, n) * K;
     for (std::size_t c = 0; c < static_cast<std::size_t>(G::bands); ++c)
-      std::copy_n(sh.begin() + static_cast<std::ptrdiff_t>(c * old * K), keep,
+      std::copy_n(sh.begin() + static_cast<std::ptrdiff_t>(c * cap * K), keep,
                   planes.begin() + static_cast<std::ptrdiff_t>(c * n * K));
     sh.swap(planes);
+  }
+
+  /// Give the band planes room for exactly N Gaussians (sh_capacity() = size()): the layout of a
+  /// model assembled by hand, of a checkpoint and of a PLY file. Values are kept.
+  void shrink_planes() { resize(size()); }
+
+  /// Become a copy of `o` whose band planes have room for exactly its N Gaussians, in this model's
+  /// buffers (no allocation when they are large enough).
+  void assign_shrunk(const GaussianModel& o) {
+    means = o.means;
+    log_scales = o.log_scales;
+    quats = o.quats;
+    opacity_logits = o.opacity_logits;
+    const std::size_t rows = o.size() * static_cast<std::size_t>(G::sh_coeffs);
+    sh.resize(o.size() * static_cast<std::size_t>(G::sh_floats));
+    for (int c = 0; c < G::bands; ++c) std::copy_n(o.sh.data() + std::size_t(c) * o.sh_plane_stride(), rows, sh.data() + std::size_t(c) * rows);
   }
 
   /// Resize every array to `n` Gaussians without keeping the values: the contents are unspecified
@@ -118,8 +146,10 @@ struct GaussianModel {
     for (auto* v : {&means, &log_scales, &quats, &opacity_logits, &sh}) v->assign(v->size(), S(0));
   }
 
-  /// Distance between the band planes of `sh`: N x K values.
-  std::size_t sh_plane_stride() const { return size() * static_cast<std::size_t>(G::sh_coeffs); }
+  /// Gaussians a band plane has room for (C >= N).
+  std::size_t sh_capacity() const { return sh.size() / static_cast<std::size_t>(G::sh_floats); }
+  /// Distance between the band planes of `sh`: C x K values.
+  std::size_t sh_plane_stride() const { return sh_capacity() * static_cast<std::size_t>(G::sh_coeffs); }
   /// The K coefficients of channel c of Gaussian i (contiguous; channel c + 1 is sh_plane_stride() further).
   S* sh_row(std::size_t i, int c) { return sh.data() + static_cast<std::size_t>(c) * sh_plane_stride() + i * G::sh_coeffs; }
   const S* sh_row(std::size_t i, int c) const {
@@ -133,7 +163,7 @@ struct GaussianModel {
   void check_consistent() const {
     const std::size_t n = size();
     if (means.size() != 3 * n || log_scales.size() != 3 * n || quats.size() != 4 * n ||
-        sh.size() != n * static_cast<std::size_t>(G::sh_floats))
+        sh.size() % static_cast<std::size_t>(G::sh_floats) != 0 || sh_capacity() < n)
       throw std::invalid_argument("GaussianModel: arrays disagree on the number of Gaussians (" +
                                   std::to_string(n) + " opacities)");
   }

@@ -68,8 +68,9 @@ void copy_step_model(const StepView& v, AnyModel& dst) {
   if constexpr (D <= 3) {
     using M = GaussianModel<Gaussian<C, D>, float>;
     if (const M* m = v.model<Gaussian<C, D>>()) {
-      if (M* d = std::get_if<M>(&dst)) *d = *m;  // vectors keep their capacity
-      else dst = *m;
+      // Band planes of N rows (the trainer's have room to grow); vectors keep their capacity.
+      if (M* d = std::get_if<M>(&dst)) d->assign_shrunk(*m);
+      else dst.emplace<M>().assign_shrunk(*m);
       return;
     }
     copy_step_model<C, D + 1>(v, dst);

@@ -314,9 +314,9 @@ class Trainer {
     const TrainStateView<G> v = state_view(next_step);
     TrainState<G> st;
     st.step = v.step;
-    st.model = *v.model;
-    st.exp_avg = *v.exp_avg;
-    st.exp_avg_sq = *v.exp_avg_sq;
+    st.model.assign_shrunk(*v.model);  // band planes of N rows, as a checkpoint holds them
+    st.exp_avg.assign_shrunk(*v.exp_avg);
+    st.exp_avg_sq.assign_shrunk(*v.exp_avg_sq);
     st.adam_steps = v.adam_steps;
     st.adam_iteration = v.adam_iteration;
     st.stats_bands = v.stats_bands;
