@@ -75,6 +75,42 @@ bool row_is_zero(const Model& m, std::size_t i) {
   return same_row(m, i, Model(1), 0);
 }
 
+/// Four Gaussians refined at step 600 under `cfg` (two bands) with two optimiser states: g0 small
+/// and g1 large with a high gradient in band 1 (g0 duplicated, g1 split), g3 faint (pruned).
+struct RefinedFour {
+  Model m, ref, exp_avg, exp_avg_sq, ref_avg, ref_sq;
+  DensifyReport rep;
+  explicit RefinedFour(const DensifyConfig& cfg) : m(make_model(4)), exp_avg(make_model(4)), exp_avg_sq(make_model(4)) {
+    m.log_scales[3] = float(std::log(0.05));     // g1 large -> split
+    m.opacity_logits[3] = float(logit(0.01));    // g3 faint -> pruned
+    ref = m;
+    for (auto& v : exp_avg_sq.means) v += 0.5f;  // distinguish the two states
+    ref_avg = exp_avg;
+    ref_sq = exp_avg_sq;
+    DensityControl dc(cfg, 2, 0);
+    // (Distinct values on purpose: GCC 12.2 with -mavx512f folds the constant {a, a, 0, 0} into a
+    // broadcast {a, a, a, a}, a wrong-code bug.)
+    dc.observe(600, 1, grads_with_ndc_norm({0.01, 0.012, 0.0, 0.0}, 64).absgrad, radii_all(4, 1), 64, 64);
+    rep = dc.step_post_backward(600, m, exp_avg, exp_avg_sq);
+  }
+  /// Every row follows the plan: the states' rows of new Gaussians are zero, the other rows copy
+  /// their source.
+  void check_rows_follow() const {
+    REQUIRE(exp_avg.size() == m.size());
+    REQUIRE(exp_avg_sq.size() == m.size());
+    for (std::size_t i = 0; i < m.size(); ++i) {
+      if (rep.plan.fresh[i]) {
+        CHECK(row_is_zero(exp_avg, i));
+        CHECK(row_is_zero(exp_avg_sq, i));
+      } else {
+        CHECK(same_row(exp_avg, i, ref_avg, rep.plan.source[i]));
+        CHECK(same_row(exp_avg_sq, i, ref_sq, rep.plan.source[i]));
+        CHECK(same_row(m, i, ref, rep.plan.source[i]));
+      }
+    }
+  }
+};
+
 }  // namespace
 
 TEST_CASE("RefinePlan: remove, duplicate, split, append and composition") {
@@ -542,21 +578,10 @@ TEST_CASE("screen-space split and prune apply only until screen_stop") {
 }
 
 TEST_CASE("optimiser state rows follow the refine plan with zeros for fresh rows") {
-  Model m = make_model(4);
-  m.log_scales[3] = float(std::log(0.05));     // g1 large -> split
-  m.opacity_logits[3] = float(logit(0.01));    // g3 faint -> pruned
-  const Model ref = m;
-  Model exp_avg = make_model(4), exp_avg_sq = make_model(4);
-  for (auto& v : exp_avg_sq.means) v += 0.5f;  // distinguish the two states
-  const Model ref_avg = exp_avg, ref_sq = exp_avg_sq;
-
   DensifyConfig cfg = DensifyConfig::msad();
   cfg.reorder_every = 0;  // gsplat's row order: survivors, copies, samples
-  DensityControl dc(cfg, 2, 0);
-  // g0 (small) and g1 (large) have a high gradient in band 1. (Distinct values on purpose: GCC 12.2
-  // with -mavx512f folds the constant {a, a, 0, 0} into a broadcast {a, a, a, a}, a wrong-code bug.)
-  dc.observe(600, 1, grads_with_ndc_norm({0.01, 0.012, 0.0, 0.0}, 64).absgrad, radii_all(4, 1), 64, 64);
-  const DensifyReport rep = dc.step_post_backward(600, m, exp_avg, exp_avg_sq);
+  const RefinedFour r(cfg);
+  const DensifyReport& rep = r.rep;
   REQUIRE(rep.refined);
   CHECK_FALSE(rep.opacity_reset);
   CHECK(rep.counts.duplicated == 1);
@@ -567,18 +592,7 @@ TEST_CASE("optimiser state rows follow the refine plan with zeros for fresh rows
   // Order: kept {0, 2}, copy of 0, samples of 1 (3 was pruned).
   CHECK(rep.plan.source == std::vector<std::uint32_t>{0, 2, 0, 1, 1});
   CHECK(rep.plan.fresh == std::vector<bool>{false, false, true, true, true});
-  REQUIRE(exp_avg.size() == 5);
-  REQUIRE(exp_avg_sq.size() == 5);
-  for (std::size_t i = 0; i < 5; ++i) {
-    if (rep.plan.fresh[i]) {
-      CHECK(row_is_zero(exp_avg, i));
-      CHECK(row_is_zero(exp_avg_sq, i));
-    } else {
-      CHECK(same_row(exp_avg, i, ref_avg, rep.plan.source[i]));
-      CHECK(same_row(exp_avg_sq, i, ref_sq, rep.plan.source[i]));
-      CHECK(same_row(m, i, ref, rep.plan.source[i]));
-    }
-  }
+  r.check_rows_follow();
   // A state of the wrong size is refused before anything changes.
   DensityControl dc2(DensifyConfig::msad(), 1, 0);
   Model m2 = make_model(3), bad_state = make_model(2);
@@ -589,32 +603,15 @@ TEST_CASE("optimiser state rows follow the refine plan with zeros for fresh rows
 
 TEST_CASE("between spatial sorts, survivors keep their rows and new Gaussians take the rows of removed ones") {
   // The refinement of the test above in the default order (reorder_every 8; step 600 does not sort).
-  Model m = make_model(4);
-  m.log_scales[3] = float(std::log(0.05));   // g1 large -> split
-  m.opacity_logits[3] = float(logit(0.01));  // g3 faint -> pruned
-  const Model ref = m;
-  Model exp_avg = make_model(4), exp_avg_sq = make_model(4);
-  for (auto& v : exp_avg_sq.means) v += 0.5f;
-  const Model ref_avg = exp_avg, ref_sq = exp_avg_sq;
-  DensityControl dc(DensifyConfig::msad(), 2, 0);
-  REQUIRE_FALSE(dc.reorders_at(600));
-  dc.observe(600, 1, grads_with_ndc_norm({0.01, 0.012, 0.0, 0.0}, 64).absgrad, radii_all(4, 1), 64, 64);
-  const DensifyReport rep = dc.step_post_backward(600, m, exp_avg, exp_avg_sq);
-  REQUIRE(rep.after == 5);
+  REQUIRE_FALSE(DensityControl(DensifyConfig::msad(), 2, 0).reorders_at(600));
+  const RefinedFour r(DensifyConfig::msad());
+  const Model &m = r.m, &ref = r.ref;
+  REQUIRE(r.rep.after == 5);
   // g0 and g2 stay in rows 0 and 2; the copy of g0 and the samples of g1 fill rows 1 and 3 (those
   // of g1 and g3) and row 4.
-  CHECK(rep.plan.source == std::vector<std::uint32_t>{0, 0, 2, 1, 1});
-  CHECK(rep.plan.fresh == std::vector<bool>{false, true, false, true, true});
-  for (std::size_t i = 0; i < 5; ++i) {
-    if (rep.plan.fresh[i]) {
-      CHECK(row_is_zero(exp_avg, i));
-      CHECK(row_is_zero(exp_avg_sq, i));
-    } else {
-      CHECK(same_row(exp_avg, i, ref_avg, rep.plan.source[i]));
-      CHECK(same_row(exp_avg_sq, i, ref_sq, rep.plan.source[i]));
-      CHECK(same_row(m, i, ref, rep.plan.source[i]));
-    }
-  }
+  CHECK(r.rep.plan.source == std::vector<std::uint32_t>{0, 0, 2, 1, 1});
+  CHECK(r.rep.plan.fresh == std::vector<bool>{false, true, false, true, true});
+  r.check_rows_follow();
   CHECK(same_row(m, 1, ref, 0));  // the copy
   // The samples: the parent's colour and rotation, their own means and smaller scales.
   for (std::size_t i : {std::size_t(3), std::size_t(4)}) {
