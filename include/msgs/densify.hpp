@@ -1075,10 +1075,11 @@ class DensityControl {
       const std::vector<std::uint32_t> order = order_by_code(morton_codes(out_mean.data(), m));
       for (std::size_t f = 0; f < m; ++f) grown_row[f] = p_prune.source[order[f]];
     } else if (cfg_.reorder_every > 0) {
-      // Between the sorts the order is free (nothing depends on a row's place): every surviving
-      // Gaussian stays in its row, the new ones take the rows of the removed ones, and only what
-      // is left over moves to the end or into the remaining gaps. A refinement then writes the
-      // rows that change instead of every row of the model and of both moments.
+      // Between the sorts every surviving Gaussian stays in its row, the new ones take the rows
+      // of the removed ones, and only what is left over moves to the end or into the remaining
+      // gaps (Gaussians with equal means keep their relative order, the one thing a row's place
+      // decides: fill_removed_rows). A refinement then writes the rows that change instead of
+      // every row of the model and of both moments.
       const auto mean_of = [&](std::uint32_t r) {
         return r < rest ? &model.means[3 * std::size_t(plan.source[r])] : &sample_mean[3 * (r - rest)];
       };
