@@ -5,9 +5,11 @@
 #pragma once
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <tuple>
 #include <type_traits>
 #include <vector>
 
@@ -55,6 +57,17 @@ inline PixelRect pixel_rect(double mx, double my, double ex, double ey, int widt
   return r;
 }
 
+namespace detail {
+/// A sort key and the id it carries (radix_sort): one record, so that a pass scatters into one
+/// stream per bucket.
+template <class Key>
+struct KeyedId {
+  Key key;
+  std::uint32_t id;
+};
+
+}  // namespace detail
+
 /// Tile lists of one frame. Intersection counts are 64-bit: a million large splats can exceed
 /// 2^32 pixel-tile pairs.
 struct Binning {
@@ -75,20 +88,20 @@ struct Binning {
   /// Working memory of bin_gaussians, kept between frames so that binning does not allocate (and
   /// page-fault) anew every frame. Not part of the result.
   struct Scratch {
-    std::vector<std::uint64_t> keys, keys2;  // depth keys of double depths (radix sort)
-    std::vector<std::uint32_t> keys32, keys32b;  // depth keys of float depths
-    /// The key buffers for depths of type S (detail::DepthKey).
+    /// Depth keys and positions into the visible ids (radix sort), for float and double depths.
+    std::vector<detail::KeyedId<std::uint32_t>> items32, items32b;
+    std::vector<detail::KeyedId<std::uint64_t>> items64, items64b;
+    /// The item buffers for depths of type S (detail::DepthKey).
     template <class S>
-    auto key_buffers() {
-      if constexpr (sizeof(S) == 4) return std::pair<std::vector<std::uint32_t>&, std::vector<std::uint32_t>&>(keys32, keys32b);
-      else return std::pair<std::vector<std::uint64_t>&, std::vector<std::uint64_t>&>(keys, keys2);
+    auto item_buffers() {
+      if constexpr (sizeof(S) == 4) return std::tie(items32, items32b);
+      else return std::tie(items64, items64b);
     }
-    std::vector<std::uint32_t> pos, pos2;    // positions into the visible ids (radix sort)
     struct TileRect {
       std::int32_t tx0, ty0, tx1, ty1;
     };
     std::vector<TileRect> rects;             // [V] tile rectangles in depth order
-    std::vector<std::uint64_t> hist;         // [chunks, tiles] or [chunks, 256]
+    std::vector<std::uint64_t> hist;         // [chunks, tiles] or [chunks, radix buckets]
   } scratch;
 };
 
@@ -111,78 +124,120 @@ inline DepthKey<S> depth_key(S z) {
 /// so that every result (and its bits) is too.
 inline int fixed_chunks(std::size_t n) { return int(std::clamp<std::size_t>(n / 4096, 1, 64)); }
 
-/// Stable LSD radix sort of `ids` by `keys` (bytes of the key, low to high, `key_bytes` of them);
-/// equal keys keep their input order, so ties stay ordered by Gaussian index. Each pass is a
-/// chunked counting sort (per-chunk histograms, then every chunk scatters from its own cursors),
-/// parallel over a fixed number of chunks, all passes in one parallel region. `keys2`, `ids2` and
-/// `hist` are scratch. A stable sort has one result, so the chunking does not change a bit.
+/// Widest digit of radix_sort, in bits.
+inline constexpr int kRadixMaxDigit = 11;
+
+/// Stable LSD radix sort of `items` by key; equal keys keep their input order. The keys are first
+/// reduced to their range (key - min, which keeps their order and their ties) and sorted in as few
+/// passes as that range needs, with digits of up to kRadixMaxDigit bits: the depths of one view
+/// span a few octaves, 25 bits of a float's pattern, 3 passes instead of 4 of a byte. Each pass
+/// is a chunked counting sort (per-chunk histograms, then every chunk scatters from its own
+/// cursors), parallel over a fixed number of chunks, all passes in one parallel region. The keys
+/// come back reduced (minus the smallest). `scratch` and `hist` are working memory. A stable sort
+/// has one result, so the chunking does not change a bit.
 template <class Key>
-inline void radix_sort_by_key(std::vector<Key>& keys, std::vector<std::uint32_t>& ids, int key_bytes,
-                              std::vector<Key>& keys2, std::vector<std::uint32_t>& ids2,
-                              std::vector<std::uint64_t>& hist) {
+inline void radix_sort(std::vector<KeyedId<Key>>& items, std::vector<KeyedId<Key>>& scratch,
+                       std::vector<std::uint64_t>& hist) {
   static_assert(std::is_unsigned_v<Key>);
-  const std::size_t n = keys.size();
-  keys2.resize(n);
-  ids2.resize(n);
+  using Item = KeyedId<Key>;
+  const std::size_t n = items.size();
+  if (n == 0) return;
   const int chunks = fixed_chunks(n);
   auto chunk_begin = [&](int k) { return n * std::size_t(k) / std::size_t(chunks); };
-  hist.assign(std::size_t(chunks) * 256, 0);
-  bool skip = false;  // this pass would be the identity (written by one thread between barriers)
-  int passes = 0;     // passes that scattered: the result is in keys2 when odd
+  // The keys' range, per chunk (fixed_chunks gives at most 64).
+  Key lo[64], hi[64];
+#pragma omp parallel for schedule(static)
+  for (int k = 0; k < chunks; ++k) {
+    Key a = items[chunk_begin(k)].key, b = a;
+    const std::size_t e = chunk_begin(k + 1);
+    for (std::size_t i = chunk_begin(k); i < e; ++i) {
+      a = std::min(a, items[i].key);
+      b = std::max(b, items[i].key);
+    }
+    lo[k] = a;
+    hi[k] = b;
+  }
+  const Key kmin = *std::min_element(lo, lo + chunks), kmax = *std::max_element(hi, hi + chunks);
+  if (kmin == kmax) {  // every key equal: the input order is the sorted order
+    for (Item& it : items) it.key = Key(0);
+    return;
+  }
+  const int bits = int(std::bit_width(Key(kmax - kmin)));
+  const int passes = (bits + kRadixMaxDigit - 1) / kRadixMaxDigit, digit = (bits + passes - 1) / passes;
+  const std::size_t B = std::size_t(1) << digit;
+  const Key mask = Key(B - 1);
+  scratch.resize(n);
+  hist.resize(std::size_t(chunks) * B);  // [chunks, B]
+  int scattered = 0;  // passes that scattered: the result is in `scratch` when odd
+  bool skip = false;  // the current pass would be the identity
 #pragma omp parallel
   {
-    Key* src = keys.data();
-    std::uint32_t* src_id = ids.data();
-    Key* dst = keys2.data();
-    std::uint32_t* dst_id = ids2.data();
-    for (int byte = 0; byte < key_bytes; ++byte) {
-      const unsigned shift = 8u * unsigned(byte);
+    Item* src = items.data();
+    Item* dst = scratch.data();
+    for (int p = 0; p < passes; ++p) {
+      const unsigned shift = unsigned(p * digit);
 #pragma omp for schedule(static)
       for (int k = 0; k < chunks; ++k) {
-        std::uint64_t* h = hist.data() + std::size_t(k) * 256;
-        std::fill_n(h, 256, std::uint64_t(0));
+        std::uint64_t* h = hist.data() + std::size_t(k) * B;
+        std::fill_n(h, B, std::uint64_t(0));
         const std::size_t e = chunk_begin(k + 1);  // (hoisted: the stores below could alias it for the compiler)
-        for (std::size_t i = chunk_begin(k); i < e; ++i) ++h[(src[i] >> shift) & 0xff];
+        if (p == 0)
+          for (std::size_t i = chunk_begin(k); i < e; ++i) {
+            const Key x = Key(src[i].key - kmin);  // the keys reduced on the first pass
+            src[i].key = x;
+            ++h[x & mask];
+          }
+        else
+          for (std::size_t i = chunk_begin(k); i < e; ++i) ++h[(src[i].key >> shift) & mask];
       }
+      // The cursors (bucket-major, chunk-minor: stable), unless one bucket holds every key (the
+      // pass would be the identity). Written by one thread; the single's barrier publishes them.
 #pragma omp single
       {
-        // Every key shares this byte: the pass would be the identity.
         skip = false;
-        for (int b = 0; b < 256 && !skip; ++b) {
+        for (std::size_t b = 0; b < B && !skip; ++b) {
           std::uint64_t total = 0;
-          for (int k = 0; k < chunks; ++k) total += hist[std::size_t(k) * 256 + std::size_t(b)];
+          for (int k = 0; k < chunks; ++k) total += hist[std::size_t(k) * B + b];
           skip = total == n;
         }
         if (!skip) {
-          std::uint64_t sum = 0;  // cursors: bucket-major, chunk-minor (stable)
-          for (int b = 0; b < 256; ++b)
+          std::uint64_t sum = 0;
+          for (std::size_t b = 0; b < B; ++b)
             for (int k = 0; k < chunks; ++k) {
-              std::uint64_t& h = hist[std::size_t(k) * 256 + std::size_t(b)];
+              std::uint64_t& h = hist[std::size_t(k) * B + b];
               const std::uint64_t c = h;
               h = sum;
               sum += c;
             }
-          ++passes;
+          ++scattered;
         }
       }
       if (skip) continue;  // every thread read the same flag: the single's barrier came before
 #pragma omp for schedule(static)
       for (int k = 0; k < chunks; ++k) {
-        std::uint64_t* cursor = hist.data() + std::size_t(k) * 256;
+        std::uint64_t* cursor = hist.data() + std::size_t(k) * B;
         const std::size_t e = chunk_begin(k + 1);
-        for (std::size_t i = chunk_begin(k); i < e; ++i) {
-          const std::uint64_t p = cursor[(src[i] >> shift) & 0xff]++;
-          dst[p] = src[i];
-          dst_id[p] = src_id[i];
-        }
+        for (std::size_t i = chunk_begin(k); i < e; ++i) dst[cursor[(src[i].key >> shift) & mask]++] = src[i];
       }
       std::swap(src, dst);
-      std::swap(src_id, dst_id);
     }
   }
-  if (passes % 2 == 1) {
-    keys.swap(keys2);
-    ids.swap(ids2);
+  if (scattered % 2 == 1) items.swap(scratch);
+}
+
+/// radix_sort of `ids` by `keys` (equal keys keep their input order); `keys` come back sorted and
+/// reduced (minus the smallest). `items` and `scratch` are working memory.
+template <class Key>
+inline void radix_sort_by_key(std::vector<Key>& keys, std::vector<std::uint32_t>& ids,
+                              std::vector<KeyedId<Key>>& items, std::vector<KeyedId<Key>>& scratch,
+                              std::vector<std::uint64_t>& hist) {
+  const std::size_t n = keys.size();
+  items.resize(n);
+  for (std::size_t i = 0; i < n; ++i) items[i] = {keys[i], ids[i]};
+  radix_sort(items, scratch, hist);
+  for (std::size_t i = 0; i < n; ++i) {
+    keys[i] = items[i].key;
+    ids[i] = items[i].id;
   }
 }
 
@@ -214,23 +269,19 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
   //    (increasing ids, so ties stay ordered by id unless tie_key orders them below).
   //    The keys, and the pair count of every Gaussian (its tile-rectangle area, for step 2), are
   //    filled in one parallel pass.
-  const auto key_buffers = sc.template key_buffers<S>();
-  auto& keys = key_buffers.first;
-  auto& keys2 = key_buffers.second;
-  keys.resize(V);
-  sc.pos.resize(V);
+  auto [items, items2] = sc.template item_buffers<S>();
+  items.resize(V);
   out.pair_offset.resize(V + 1);
   out.pair_offset[0] = 0;
 #pragma omp parallel for schedule(static)
   for (std::int64_t iv = 0; iv < std::int64_t(V); ++iv) {
     const std::size_t v = std::size_t(iv);
     const std::uint32_t g = visible_ids[v];
-    keys[v] = detail::depth_key(depth[g]);
-    sc.pos[v] = std::uint32_t(v);
+    items[v] = {detail::depth_key(depth[g]), std::uint32_t(v)};
     const PixelRect& r = rects[g];
     out.pair_offset[v + 1] = std::uint64_t(r.x1 / TS - r.x0 / TS + 1) * std::uint64_t(r.y1 / TS - r.y0 / TS + 1);
   }
-  detail::radix_sort_by_key(keys, sc.pos, int(sizeof(S)), keys2, sc.pos2, sc.hist);
+  detail::radix_sort(items, items2, sc.hist);
   if constexpr (!std::is_same_v<TieKey, TiesById>) {
     // Runs of equal depth keys, ordered by (tie key, id); positions are increasing ids within a run.
     // In parallel over fixed chunks: a run belongs to the chunk it starts in, and may end past it.
@@ -241,16 +292,16 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
       const std::size_t c1 = V * std::size_t(k + 1) / std::size_t(tchunks);
       std::size_t i = V * std::size_t(k) / std::size_t(tchunks);
       if (i > 0)
-        while (i < c1 && keys[i] == keys[i - 1]) ++i;  // the rest of an earlier chunk's run
+        while (i < c1 && items[i].key == items[i - 1].key) ++i;  // the rest of an earlier chunk's run
       while (i < c1) {
         std::size_t e = i + 1;
-        while (e < V && keys[e] == keys[i]) ++e;
+        while (e < V && items[e].key == items[i].key) ++e;
         if (e - i > 1) {
-          const auto by_key = [&](std::uint32_t a, std::uint32_t b) {
-            const std::uint64_t ka = tie_key(visible_ids[a]), kb = tie_key(visible_ids[b]);
-            return ka != kb ? ka < kb : a < b;
+          const auto by_key = [&](const auto& a, const auto& b) {
+            const std::uint64_t ka = tie_key(visible_ids[a.id]), kb = tie_key(visible_ids[b.id]);
+            return ka != kb ? ka < kb : a.id < b.id;
           };
-          std::sort(sc.pos.begin() + std::ptrdiff_t(i), sc.pos.begin() + std::ptrdiff_t(e), by_key);
+          std::sort(items.begin() + std::ptrdiff_t(i), items.begin() + std::ptrdiff_t(e), by_key);
         }
         i = e;
       }
@@ -264,8 +315,8 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
   sc.rects.resize(V);
 #pragma omp parallel for schedule(static)
   for (std::int64_t i = 0; i < std::int64_t(V); ++i) {
-    if (i + kBinPrefetch < std::int64_t(V)) __builtin_prefetch(&rects[visible_ids[sc.pos[std::size_t(i + kBinPrefetch)]]]);
-    const std::uint32_t g = visible_ids[sc.pos[std::size_t(i)]];
+    if (i + kBinPrefetch < std::int64_t(V)) __builtin_prefetch(&rects[visible_ids[items[std::size_t(i + kBinPrefetch)].id]]);
+    const std::uint32_t g = visible_ids[items[std::size_t(i)].id];
     out.order[std::size_t(i)] = g;
     const PixelRect& r = rects[g];
     sc.rects[std::size_t(i)] = {r.x0 / TS, r.y0 / TS, r.x1 / TS, r.y1 / TS};
@@ -277,7 +328,11 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
 
   // 3. Stable counting sort by tile over a fixed number of chunks, handed out one at a time: the
   //    chunks are in depth order, and the near Gaussians cover more tiles than the far ones.
+  //    Most splats cover one tile or a 2x2 block of them: those are counted without a branch on
+  //    their shape (the loops over a rectangle of 1 to 4 tiles were mispredicted about once per
+  //    Gaussian, half the time of the count); larger ones in loops.
   const int chunks = detail::fixed_chunks(V);
+  const std::size_t tx = std::size_t(grid.tiles_x);
   sc.hist.assign(std::size_t(chunks) * std::size_t(tiles), 0);  // [chunks, tiles]
   auto chunk_begin = [&](int k) { return V * std::size_t(k) / std::size_t(chunks); };
 #pragma omp parallel for schedule(dynamic, 1)
@@ -286,8 +341,17 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
     const std::size_t e = chunk_begin(k + 1);
     for (std::size_t s = chunk_begin(k); s < e; ++s) {
       const Binning::Scratch::TileRect& r = sc.rects[s];
-      for (int ty = r.ty0; ty <= r.ty1; ++ty)
-        for (int tx = r.tx0; tx <= r.tx1; ++tx) ++h[std::size_t(ty) * std::size_t(grid.tiles_x) + std::size_t(tx)];
+      const std::size_t w = std::size_t(r.tx1 - r.tx0), ht = std::size_t(r.ty1 - r.ty0);  // extents - 1
+      const std::size_t t = std::size_t(r.ty0) * tx + std::size_t(r.tx0);
+      if ((w | ht) <= 1) {  // 1x1 to 2x2 tiles; a tile left out adds 0 to tile t
+        ++h[t];
+        h[t + w] += w;
+        h[t + ht * tx] += ht;
+        h[t + ht * tx + w] += w & ht;
+      } else {
+        for (int ty = r.ty0; ty <= r.ty1; ++ty)
+          for (int x = r.tx0; x <= r.tx1; ++x) ++h[std::size_t(ty) * tx + std::size_t(x)];
+      }
     }
   }
   out.tile_offset.resize(std::size_t(tiles) + 1);
@@ -312,13 +376,13 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
     const std::size_t e = chunk_begin(k + 1);
     constexpr std::size_t D = std::size_t(kBinPrefetch);
     for (std::size_t s = chunk_begin(k); s < e; ++s) {
-      if (s + D < e) __builtin_prefetch(&out.pair_offset[sc.pos[s + D]]);
+      if (s + D < e) __builtin_prefetch(&out.pair_offset[items[s + D].id]);
       const std::uint32_t g = out.order[s];
       const Binning::Scratch::TileRect& r = sc.rects[s];
-      std::uint64_t m = out.pair_offset[sc.pos[s]];
+      std::uint64_t m = out.pair_offset[items[s].id];
       for (int ty = r.ty0; ty <= r.ty1; ++ty)
-        for (int tx = r.tx0; tx <= r.tx1; ++tx) {
-          const std::uint64_t slot = cursor[std::size_t(ty) * std::size_t(grid.tiles_x) + std::size_t(tx)]++;
+        for (int x = r.tx0; x <= r.tx1; ++x) {
+          const std::uint64_t slot = cursor[std::size_t(ty) * tx + std::size_t(x)]++;
           out.tile_list[slot] = g;
           out.pair_index[slot] = m++;
         }

@@ -83,9 +83,9 @@ std::vector<std::uint64_t> morton_codes(const S* means, std::size_t n) {
 inline std::vector<std::uint32_t> order_by_code(std::vector<std::uint64_t> code) {
   std::vector<std::uint32_t> order(code.size());
   for (std::size_t i = 0; i < order.size(); ++i) order[i] = std::uint32_t(i);
-  std::vector<std::uint64_t> keys2, hist;
-  std::vector<std::uint32_t> ids2;
-  detail::radix_sort_by_key(code, order, int(sizeof(std::uint64_t)), keys2, ids2, hist);
+  std::vector<detail::KeyedId<std::uint64_t>> items, scratch;
+  std::vector<std::uint64_t> hist;
+  detail::radix_sort_by_key(code, order, items, scratch, hist);
   return order;
 }
 
