@@ -355,26 +355,46 @@ inline std::vector<std::uint32_t> changed_rows(const RefinePlan& plan, bool zero
   return out;
 }
 
-/// Apply `plan` to `rows` in place, writing only the output rows `changed` (changed_rows), each
-/// copied straight from its source, except a source that is itself the place of a changed row (the
-/// row of a split Gaussian that its samples copy): those are read into a buffer before any row is
-/// written. `planes` planes of `cap` rows (cap >= both sizes, unchanged: the planes do not move),
-/// or one plane that is resized to plan.size() rows. Rows a shrinking plan leaves behind in a plane
-/// are zeroed. The cost is that of the changed rows, not of the array.
+/// The moves of an in-place refinement (apply_changed_rows), the same for every array it applies
+/// to: found once per plan, not once per array.
+struct RowChanges {
+  std::vector<std::uint32_t> rows;    ///< changed_rows, ascending
+  /// [rows.size()] 1 where the row copies a source that is itself the place of a changed row (the
+  /// row of a split Gaussian that its samples copy): staged before any row is written.
+  std::vector<std::uint8_t> staged;
+  std::vector<std::uint32_t> hazard;  ///< the indices j into `rows` with staged[j]
+};
+
+inline RowChanges row_changes(const RefinePlan& plan, bool zero_fresh) {
+  RowChanges c;
+  c.rows = changed_rows(plan, zero_fresh);
+  std::vector<std::uint8_t> written(std::max(plan.input_size, plan.size()), 0);
+  for (const std::uint32_t f : c.rows) written[f] = 1;
+  c.staged.assign(c.rows.size(), 0);
+  for (std::size_t j = 0; j < c.rows.size(); ++j) {
+    const std::size_t f = c.rows[j];
+    const std::uint32_t s = plan.source[f];
+    if (s != RefinePlan::none && !(zero_fresh && plan.fresh[f]) && written[s]) {
+      c.staged[j] = 1;
+      c.hazard.push_back(std::uint32_t(j));
+    }
+  }
+  return c;
+}
+
+/// Apply `plan` to `rows` in place, writing only the output rows `changes.rows` (row_changes of
+/// the same plan and zero_fresh), each copied straight from its source, except a source that is
+/// itself the place of a changed row: those are read into a buffer before any row is written.
+/// `planes` planes of `cap` rows (cap >= both sizes, unchanged: the planes do not move), or one
+/// plane that is resized to plan.size() rows. Rows a shrinking plan leaves behind in a plane are
+/// zeroed. The cost is that of the changed rows, not of the array.
 template <class T>
-void apply_changed_rows(const RefinePlan& plan, const std::vector<std::uint32_t>& changed, std::vector<T>& rows,
+void apply_changed_rows(const RefinePlan& plan, const RowChanges& changes, std::vector<T>& rows,
                         std::size_t width, std::size_t planes, std::size_t cap, bool zero_fresh) {
+  const std::vector<std::uint32_t>& changed = changes.rows;
+  const std::vector<std::uint32_t>& hazard = changes.hazard;
   const std::size_t n = plan.input_size, m = plan.size(), w = width, c = changed.size();
   const std::size_t in_stride = planes == 1 ? n : cap, out_stride = planes == 1 ? m : cap;
-  // Sources that are also written, and the changed rows that read them.
-  std::vector<std::uint8_t> written(std::max(n, m), 0);
-  for (const std::uint32_t f : changed) written[f] = 1;
-  std::vector<std::uint32_t> hazard;  // indices j into `changed`
-  for (std::size_t j = 0; j < c; ++j) {
-    const std::size_t f = changed[j];
-    const std::uint32_t s = plan.source[f];
-    if (s != RefinePlan::none && !(zero_fresh && plan.fresh[f]) && written[s]) hazard.push_back(std::uint32_t(j));
-  }
   std::vector<T> staged(planes * hazard.size() * w);
   for (std::size_t h = 0; h < hazard.size(); ++h)
     for (std::size_t q = 0; q < planes; ++q)
@@ -388,10 +408,11 @@ void apply_changed_rows(const RefinePlan& plan, const std::vector<std::uint32_t>
   const bool parallel = c * planes * w > 16384;
 #pragma omp parallel for schedule(static, 256) if (parallel)
   for (std::ptrdiff_t jj = 0; jj < sc; ++jj) {
-    const std::size_t f = changed[std::size_t(jj)];
+    const std::size_t j = std::size_t(jj);
+    if (changes.staged[j]) continue;
+    const std::size_t f = changed[j];
     const std::uint32_t s = plan.source[f];
     const bool zero = s == RefinePlan::none || (zero_fresh && plan.fresh[f]);
-    if (!zero && written[s]) continue;  // staged
     for (std::size_t q = 0; q < planes; ++q) {
       T* to = rows.data() + (q * out_stride + f) * w;
       if (zero) std::fill_n(to, w, T(0));
@@ -439,13 +460,13 @@ void apply_arrays(const RefinePlan& plan, GaussianModel<G, S>& m, bool zero_fres
   m.check_consistent();
   plan.validate();
   const std::size_t rows_out = plan.size(), cap = m.sh_capacity();
-  const std::vector<std::uint32_t> changed = changed_rows(plan, zero_fresh);
-  const bool few = changed.size() * 2 <= rows_out;
+  const RowChanges changes = row_changes(plan, zero_fresh);
+  const bool few = changes.rows.size() * 2 <= rows_out;
   for_each_array(m, [&](auto& v, std::size_t w, std::size_t planes) {
     const bool sh = &v == &m.sh;
     const std::size_t in_cap = sh ? cap : plan.input_size;
     if (few && (planes == 1 || rows_out <= in_cap)) {
-      apply_changed_rows(plan, changed, v, w, planes, in_cap, zero_fresh);
+      apply_changed_rows(plan, changes, v, w, planes, in_cap, zero_fresh);
       return;
     }
     if (sh && (spare || in_cap != plan.input_size)) {
