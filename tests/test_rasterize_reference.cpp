@@ -9,9 +9,11 @@
 
 #include <cstdio>
 #include <cstring>
+#include <iterator>
 #include <limits>
 #include <random>
 #include <string>
+#include <utility>
 
 using namespace msgs;
 using namespace msgs::testing;
@@ -362,6 +364,43 @@ TEST_CASE("pixel_rect: every pixel centre within the extent, clipped to the imag
   CHECK(pixel_rect(10, -inf, 2, 2, W, H).empty());
   const PixelRect all = pixel_rect(10, 10, inf, inf, W, H);  // an infinite extent covers the image
   CHECK((all.x0 == 0 && all.y0 == 0 && all.x1 == W - 1 && all.y1 == H - 1));
+}
+
+TEST_CASE("pixel_rect_lanes: the rectangles of pixel_rect, lane by lane, for every kind of input") {
+  constexpr int L = detail::kProjLanes;
+  const double nan = std::numeric_limits<double>::quiet_NaN(), inf = std::numeric_limits<double>::infinity();
+  const double specials[] = {nan, inf, -inf, 0.0, -0.0, 0.5, -0.5, 1.5, 63.5, 64.0, 64.5, -2.0, -1.5, 1e300, -1e300,
+                             3e9, -3e9, 1e-310, 47.5, 48.0, 48.5, 0.49999999999999994, 2.0000000000000004};
+  std::mt19937_64 rng(23);
+  std::uniform_real_distribution<double> um(-40.0, 110.0), ue(0.0, 40.0);
+  // Exact halves and near-halves (where ceil and floor turn), random values and the specials.
+  const auto draw = [&](bool extent) {
+    switch (rng() % 4) {
+      case 0: return specials[rng() % std::size(specials)];
+      case 1: return double(std::int64_t(rng() % 300) - 100) * 0.5;
+      case 2: return std::nextafter(double(std::int64_t(rng() % 200) - 50) * 0.5, rng() % 2 ? inf : -inf);
+      default: return extent ? ue(rng) : um(rng);
+    }
+  };
+  for (const auto& [W, H] : {std::pair{64, 48}, std::pair{1, 1}, std::pair{240, 180}}) {
+    for (int t = 0; t < 20000; ++t) {
+      detail::ProjVec mx, my, ex, ey;
+      for (int l = 0; l < L; ++l) {
+        mx[l] = draw(false);
+        my[l] = draw(false);
+        ex[l] = draw(true);
+        ey[l] = draw(true);
+      }
+      PixelRect got[L];
+      detail::pixel_rect_lanes(mx, my, ex, ey, W, H, got);
+      for (int l = 0; l < L; ++l) {
+        const PixelRect want = pixel_rect(mx[l], my[l], ex[l], ey[l], W, H);
+        INFO("mean ", mx[l], " ", my[l], " extent ", ex[l], " ", ey[l], " image ", W, "x", H);
+        REQUIRE(got[l].empty() == want.empty());
+        if (!want.empty()) CHECK((got[l].x0 == want.x0 && got[l].x1 == want.x1 && got[l].y0 == want.y0 && got[l].y1 == want.y1));
+      }
+    }
+  }
 }
 
 TEST_CASE("BlockRange::blocks: the bit set of every block in the range, for every rectangle and clipped tile") {

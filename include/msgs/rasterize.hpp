@@ -5,12 +5,16 @@
 #pragma once
 
 #include <algorithm>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <limits>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "bin.hpp"
@@ -23,6 +27,61 @@
 #include "project.hpp"
 
 namespace msgs {
+
+namespace detail {
+
+/// pixel_rect of a vector of splats (ProjVec lanes, doubles): the same rectangles, lane by lane.
+/// Exact: each bound is computed by the same IEEE operations, clamped to a pixel beyond the image
+/// (which changes no bound inside it and keeps an empty rectangle empty), then rounded through 64-bit
+/// integers, where ceil and floor of such small values are exact.
+inline void pixel_rect_lanes(const ProjVec& mx, const ProjVec& my, const ProjVec& ex, const ProjVec& ey, int width,
+                             int height, PixelRect* out) {
+  using L = Lanes<ProjVec>;
+  using I = L::M;  // signed 64-bit lanes
+  const auto abs = [](const ProjVec& x) {
+    return std::bit_cast<ProjVec>(std::bit_cast<I>(x) & (std::numeric_limits<std::int64_t>::max() - I{}));
+  };
+  const I ok = lfinite(mx) & lfinite(my) & (ex == ex) & (ey == ey);
+  const ProjVec zero = L::splat(0.0);
+  const ProjVec ax = L::sel(ok, (ex * (1.0 + 1e-4) + 1e-6 * abs(mx)) + 1e-2, zero);
+  const ProjVec ay = L::sel(ok, (ey * (1.0 + 1e-4) + 1e-6 * abs(my)) + 1e-2, zero);
+  const ProjVec cx = L::sel(ok, mx, zero), cy = L::sel(ok, my, zero);
+  // ceil(a) and floor(b) of a, b in [-2, size + 1]: t = trunc(a) as an integer, then up or down.
+  const auto ceil_clamped = [&](const ProjVec& a, double size) {
+    const ProjVec c = lclamp(a, -2.0, size + 1.0);
+    const I t = __builtin_convertvector(c, I);
+    return t + LaneInts<ProjVec>::one_where(__builtin_convertvector(t, ProjVec) < c);
+  };
+  const auto floor_clamped = [&](const ProjVec& b, double size) {
+    const ProjVec c = lclamp(b, -2.0, size + 1.0);
+    const I t = __builtin_convertvector(c, I);
+    return t - LaneInts<ProjVec>::one_where(__builtin_convertvector(t, ProjVec) > c);
+  };
+  const I zero_i = I{}, wmax = std::int64_t(width - 1) - I{}, hmax = std::int64_t(height - 1) - I{};
+  const auto imax = [](const I& a, const I& b) { return a < b ? b : a; };
+  const auto imin = [](const I& a, const I& b) { return b < a ? b : a; };
+  const I x0 = imax(zero_i, ceil_clamped((cx - ax) - 0.5, double(width)));
+  const I x1 = imin(wmax, floor_clamped((cx + ax) - 0.5, double(width)));
+  const I y0 = imax(zero_i, ceil_clamped((cy - ay) - 0.5, double(height)));
+  const I y1 = imin(hmax, floor_clamped((cy + ay) - 0.5, double(height)));
+  const I on = ok & (x0 <= x1) & (y0 <= y1);
+  for (int l = 0; l < L::kCount; ++l)
+    out[l] = on[l] ? PixelRect{std::int32_t(x0[l]), std::int32_t(y0[l]), std::int32_t(x1[l]), std::int32_t(y1[l])}
+                   : PixelRect{};
+}
+
+/// The lanes of a projection vector as ProjVec doubles: itself, or the two halves of a float vector.
+inline void to_double_lanes(const ProjVec& v, ProjVec* out) { out[0] = v; }
+template <int... K>
+inline void to_double_lanes(const ProjVecF& v, ProjVec* out, std::integer_sequence<int, K...>) {
+  out[0] = __builtin_convertvector(__builtin_shufflevector(v, v, K...), ProjVec);
+  out[1] = __builtin_convertvector(__builtin_shufflevector(v, v, (K + kProjLanes)...), ProjVec);
+}
+inline void to_double_lanes(const ProjVecF& v, ProjVec* out) {
+  to_double_lanes(v, out, std::make_integer_sequence<int, kProjLanes>{});
+}
+
+}  // namespace detail
 
 /// Compile-time rasteriser features; each costs nothing when off. `depth`: also output the
 /// accumulated depth sum_i w_i z_i. `antialiased`: gsplat's antialiased mode (opacity times
@@ -453,6 +512,20 @@ class Rasterizer {
         return c;
       }, col);
     }
+    // The pixel rectangles of the whole vector at once (the lanes of pixel_rect).
+    PixelRect rect_of[LD::kCount];
+    if constexpr (!std::is_arithmetic_v<D>) {
+      if (LD::any(drawn)) {
+        constexpr int H = LD::kCount / detail::kProjLanes;  // double vectors per lane vector
+        detail::ProjVec mxd[H], myd[H], exd[H], eyd[H];
+        detail::to_double_lanes(pl.mean2d[0], mxd);
+        detail::to_double_lanes(pl.mean2d[1], myd);
+        detail::to_double_lanes(pl.extent[0], exd);
+        detail::to_double_lanes(pl.extent[1], eyd);
+        for (int h = 0; h < H; ++h)
+          detail::pixel_rect_lanes(mxd[h], myd[h], exd[h], eyd[h], grid_.width, grid_.height, rect_of + h * detail::kProjLanes);
+      }
+    }
     for (int l = 0; l < n; ++l) {
       if (hard >> l & 1u) continue;
       const std::size_t i = ids[l];
@@ -462,7 +535,9 @@ class Rasterizer {
       if (!detail::lane_on(drawn, l)) continue;
       const double mx = detail::lane(pl.mean2d[0], l), my = detail::lane(pl.mean2d[1], l);
       const double ex = detail::lane(pl.extent[0], l), ey = detail::lane(pl.extent[1], l);
-      const PixelRect rect = pixel_rect(mx, my, ex, ey, grid_.width, grid_.height);
+      PixelRect rect;
+      if constexpr (std::is_arithmetic_v<D>) rect = pixel_rect(mx, my, ex, ey, grid_.width, grid_.height);
+      else rect = rect_of[l];
       if (rect.empty()) continue;
       Splat<S>& s = splats_[i];
       s.mx = S(mx); s.my = S(my);
