@@ -278,6 +278,20 @@ TEST_CASE("sparse Adam: listed rows update as dense Adam does, other rows and th
   const std::vector<std::uint32_t> unsorted = {3, 1}, outside = {2, 11};
   CHECK_THROWS_AS(sparse.step(ps, g, mask, &unsorted), std::invalid_argument);
   CHECK_THROWS_AS(sparse.step(ps, g, mask, &outside), std::invalid_argument);
+  // Long lists (a view's visible Gaussians) are checked in parallel: a fault deep inside is found.
+  const std::size_t big = 40000;
+  Model pb(big), gb(big);
+  msgs::Adam<G7, float> adam_big({}, big);
+  std::vector<std::uint32_t> all(big);
+  for (std::size_t i = 0; i < big; ++i) all[i] = std::uint32_t(i);
+  CHECK_NOTHROW(adam_big.step(pb, gb, mask, &all));
+  for (const std::size_t at : {std::size_t(1), std::size_t(20001), big - 1}) {
+    std::vector<std::uint32_t> repeat = all, past = all;
+    repeat[at] = repeat[at - 1];
+    past[at] = std::uint32_t(big);
+    CHECK_THROWS_AS(adam_big.step(pb, gb, mask, &repeat), std::invalid_argument);
+    CHECK_THROWS_AS(adam_big.step(pb, gb, mask, &past), std::invalid_argument);
+  }
 }
 
 TEST_CASE("Unlisted::zero_gradient: dense Adam bit for bit, without reading the unlisted gradient rows") {
