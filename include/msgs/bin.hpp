@@ -194,23 +194,21 @@ inline void radix_sort(std::vector<KeyedId<Key>>& items, std::vector<KeyedId<Key
       // pass would be the identity). Written by one thread; the single's barrier publishes them.
 #pragma omp single
       {
+        // One serial pass: the cursors, and each bucket's total on the way (when the pass is
+        // skipped, the next one counts its histograms anew).
+        std::uint64_t sum = 0;
         skip = false;
-        for (std::size_t b = 0; b < B && !skip; ++b) {
-          std::uint64_t total = 0;
-          for (int k = 0; k < chunks; ++k) total += hist[std::size_t(k) * B + b];
-          skip = total == n;
+        for (std::size_t b = 0; b < B; ++b) {
+          const std::uint64_t start = sum;
+          for (int k = 0; k < chunks; ++k) {
+            std::uint64_t& h = hist[std::size_t(k) * B + b];
+            const std::uint64_t c = h;
+            h = sum;
+            sum += c;
+          }
+          skip = skip || sum - start == n;
         }
-        if (!skip) {
-          std::uint64_t sum = 0;
-          for (std::size_t b = 0; b < B; ++b)
-            for (int k = 0; k < chunks; ++k) {
-              std::uint64_t& h = hist[std::size_t(k) * B + b];
-              const std::uint64_t c = h;
-              h = sum;
-              sum += c;
-            }
-          ++scattered;
-        }
+        if (!skip) ++scattered;
       }
       if (skip) continue;  // every thread read the same flag: the single's barrier came before
 #pragma omp for schedule(static)
