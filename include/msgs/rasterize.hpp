@@ -31,9 +31,10 @@ namespace msgs {
 namespace detail {
 
 /// pixel_rect of a vector of splats (ProjVec lanes, doubles): the same rectangles, lane by lane.
-/// Exact: each bound is computed by the same IEEE operations, clamped to a pixel beyond the image
-/// (which changes no bound inside it and keeps an empty rectangle empty), then rounded through 64-bit
-/// integers, where ceil and floor of such small values are exact.
+/// Exact: each bound is computed by the same IEEE operations, clamped to [-2, size + 1] before
+/// rounding (which changes no bound inside the image and keeps an empty rectangle empty), then
+/// rounded through 64-bit integers, where ceil and floor of such small values are exact. Lanes with
+/// a non-finite mean or a NaN extent compute on zeros and give the empty rectangle.
 inline void pixel_rect_lanes(const ProjVec& mx, const ProjVec& my, const ProjVec& ex, const ProjVec& ey, int width,
                              int height, PixelRect* out) {
   using L = Lanes<ProjVec>;
