@@ -130,9 +130,10 @@ inline constexpr int kRadixMaxDigit = 11;
 /// Stable LSD radix sort of `items` by key; equal keys keep their input order. The keys are first
 /// reduced to their range (key - min, which keeps their order and their ties) and sorted in as few
 /// passes as that range needs, with digits of up to kRadixMaxDigit bits: the depths of one view
-/// span a few octaves, 25 bits of a float's pattern, 3 passes instead of 4 of a byte. Each pass
-/// is a chunked counting sort (per-chunk histograms, then every chunk scatters from its own
-/// cursors), parallel over a fixed number of chunks, all passes in one parallel region. The keys
+/// span a few octaves, 25 bits of a float's pattern, 3 passes instead of 4 of a byte. The range is
+/// found in one parallel pass; each sorting pass is a chunked counting sort (per-chunk histograms,
+/// then every chunk scatters from its own cursors), parallel over a fixed number of chunks, all of
+/// them in one parallel region. The keys
 /// come back reduced (minus the smallest). `scratch` and `hist` are working memory. A stable sort
 /// has one result, so the chunking does not change a bit.
 template <class Key>
