@@ -6,6 +6,7 @@
 #include <random>
 
 #include "msgs/loss.hpp"
+#include <msgs/large_page_new.hpp>  // as the msgs tool: large arrays in large pages (one inclusion per program)
 
 namespace {
 

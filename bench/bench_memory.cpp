@@ -17,6 +17,7 @@
 #include <msgs/adam.hpp>
 #include <msgs/loss.hpp>
 #include <msgs/rasterize.hpp>
+#include <msgs/large_page_new.hpp>  // as the msgs tool: large arrays in large pages (one inclusion per program)
 
 #include "scene_family.hpp"
 

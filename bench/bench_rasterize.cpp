@@ -9,6 +9,7 @@
 
 #include <msgs/project.hpp>
 #include <msgs/rasterize.hpp>
+#include <msgs/large_page_new.hpp>  // as the msgs tool: large arrays in large pages (one inclusion per program)
 
 #include "scene_family.hpp"
 

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include <msgs/densify.hpp>
+#include <msgs/large_page_new.hpp>  // as the msgs tool: large arrays in large pages (one inclusion per program)
 
 namespace {
 

@@ -33,6 +33,7 @@
 #include <msgs/loss.hpp>
 #include <msgs/rasterize.hpp>
 #include <msgs/schedule.hpp>
+#include <msgs/large_page_new.hpp>  // as the msgs tool: large arrays in large pages (one inclusion per program)
 
 #include "scene_family.hpp"
 

@@ -13,6 +13,7 @@
 #include <benchmark/benchmark.h>
 
 #include <msgs/snapshot.hpp>
+#include <msgs/large_page_new.hpp>  // as the msgs tool: large arrays in large pages (one inclusion per program)
 
 #include "../examples/view_api.hpp"
 #include "scene_family.hpp"

@@ -23,6 +23,7 @@
 
 #include <msgs/run.hpp>
 #include <msgs/synth.hpp>
+#include <msgs/large_page_new.hpp>  // as the msgs tool: large arrays in large pages (one inclusion per program)
 
 namespace fs = std::filesystem;
 using namespace msgs;

@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "commands.hpp"
+#include "msgs/large_page_new.hpp"  // large arrays in large pages (this program's one inclusion)
 
 int main(int argc, char** argv) {
   auto& reg = msgs::cli::registry();

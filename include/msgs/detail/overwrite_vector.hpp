@@ -4,18 +4,25 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdlib>
+#include <limits>
 #include <memory>
 #include <new>
 #include <type_traits>
 #include <utility>
 #include <vector>
 
+#include "msgs/detail/large_pages.hpp"
+
 namespace msgs::detail {
 
 /// std::allocator whose value-less construct() default-initialises: resize() of a vector of
-/// trivial values with it leaves the new values unset instead of zeroing them.
+/// trivial values with it leaves the new values unset instead of zeroing them. Its storage comes
+/// from detail::allocate_large_aware (large pages from 2 MiB on): these buffers are the tile
+/// lists and gradient records, read and written by index.
 template <class T>
 struct NoFillAllocator : std::allocator<T> {
+  static_assert(alignof(T) <= alignof(std::max_align_t), "malloc's alignment");
   using value_type = T;
   NoFillAllocator() noexcept = default;
   template <class U>
@@ -24,6 +31,13 @@ struct NoFillAllocator : std::allocator<T> {
   struct rebind {
     using other = NoFillAllocator<U>;
   };
+  T* allocate(std::size_t n) {
+    if (n > std::numeric_limits<std::size_t>::max() / sizeof(T)) throw std::bad_array_new_length();
+    void* p = allocate_large_aware(n * sizeof(T));
+    if (!p) throw std::bad_alloc();
+    return static_cast<T*>(p);
+  }
+  void deallocate(T* p, std::size_t) noexcept { std::free(p); }
   template <class U>
   void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
     ::new (static_cast<void*>(p)) U;
