@@ -1275,29 +1275,42 @@ class DensityControl {
   template <class G, class S>
   static std::vector<std::uint8_t> rows_finite(const GaussianModel<G, S>& m) {
     const std::size_t n = m.size();
-    std::vector<std::uint8_t> ok(n);
-    const auto all_finite = [](const S* v, std::size_t count) {
-      bool all = true;
-      for (std::size_t k = 0; k < count; ++k) all &= std::isfinite(v[k]);
-      return all;
-    };
-    const std::ptrdiff_t sn = static_cast<std::ptrdiff_t>(n);
+    std::vector<std::uint8_t> ok(n, 1);
+    // Non-finite values are rare: each array is scanned a block of rows at a time by an OR of
+    // exponent tests, which vectorises (std::isfinite per value and an AND per row did not, and
+    // this pass reads the whole model at every refinement), and only a block that holds one is
+    // looked at row by row.
+    using Bits = std::conditional_t<sizeof(S) == 4, std::uint32_t, std::uint64_t>;
+    static_assert(sizeof(Bits) == sizeof(S) && std::numeric_limits<S>::is_iec559);
+    constexpr Bits kExponent = sizeof(S) == 4 ? Bits(0x7f800000u) : Bits(0x7ff0000000000000ull);
+    constexpr std::size_t kBlockRows = 256;
+    const std::ptrdiff_t blocks = static_cast<std::ptrdiff_t>((n + kBlockRows - 1) / kBlockRows);
     constexpr std::size_t K = static_cast<std::size_t>(G::sh_coeffs);
 #pragma omp parallel
     {
-#pragma omp for schedule(static, 4096)
-      for (std::ptrdiff_t ii = 0; ii < sn; ++ii) {
-        const std::size_t i = static_cast<std::size_t>(ii);
-        ok[i] = std::uint8_t(all_finite(&m.means[3 * i], 3) & all_finite(&m.log_scales[3 * i], 3) &
-                             all_finite(&m.quats[4 * i], 4) & all_finite(&m.opacity_logits[i], 1));
-      }
-      for (int c = 0; c < G::bands; ++c) {
-#pragma omp for schedule(static, 4096)
-        for (std::ptrdiff_t ii = 0; ii < sn; ++ii) {
-          const std::size_t i = static_cast<std::size_t>(ii);
-          ok[i] &= std::uint8_t(all_finite(m.sh_row(i, c), K));
+      // Rows [0, n) of an array whose row i is the `width` values from base + width i.
+      const auto scan = [&](const S* base, std::size_t width) {
+#pragma omp for schedule(static)
+        for (std::ptrdiff_t b = 0; b < blocks; ++b) {
+          const std::size_t r0 = std::size_t(b) * kBlockRows, r1 = std::min(n, r0 + kBlockRows);
+          const S* v = base + r0 * width;
+          Bits bad = 0;
+          for (std::size_t k = 0, e = (r1 - r0) * width; k < e; ++k) {
+            Bits u;
+            std::memcpy(&u, v + k, sizeof u);
+            bad |= Bits((u & kExponent) == kExponent);  // infinity or NaN
+          }
+          if (bad == 0) continue;
+          for (std::size_t i = r0; i < r1; ++i)
+            for (std::size_t k = 0; k < width; ++k)
+              if (!std::isfinite(base[i * width + k])) ok[i] = 0;
         }
-      }
+      };
+      scan(m.means.data(), 3);
+      scan(m.log_scales.data(), 3);
+      scan(m.quats.data(), 4);
+      scan(m.opacity_logits.data(), 1);
+      for (int c = 0; c < G::bands; ++c) scan(m.sh_row(0, c), K);
     }
     return ok;
   }
