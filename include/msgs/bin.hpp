@@ -101,6 +101,8 @@ struct Binning {
       std::int32_t tx0, ty0, tx1, ty1;
     };
     std::vector<TileRect> rects;             // [V] tile rectangles in depth order
+    std::vector<std::uint64_t> first_pair;   // [V] each one's first pair (pair_offset) in depth order
+    std::vector<std::uint64_t> chunk_sums;   // [chunks + 1] pair counts of the prefix sum's chunks
     std::vector<std::uint64_t> hist;         // [chunks, tiles] or [chunks, radix buckets]
   } scratch;
 };
@@ -306,24 +308,49 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
       }
     }
   }
-  // The order and the tile rectangles in that order, gathered once so that the two passes below
-  // read them sequentially. In depth order the ids jump over the whole model: the rectangle a few
-  // iterations ahead is prefetched (at a million Gaussians nearly every read would otherwise miss
-  // the cache).
+  // 2. Pairs per Gaussian (counted in step 1), prefix-summed in id order: per fixed chunk, then
+  //    the chunks' totals, then each chunk from its offset (integers: the same sums in any order).
+  {
+    const int pchunks = detail::fixed_chunks(V);
+    sc.chunk_sums.assign(std::size_t(pchunks) + 1, 0);
+    std::uint64_t* po = out.pair_offset.data() + 1;  // po[v]: pairs of v, then pairs up to v inclusive
+#pragma omp parallel for schedule(static)
+    for (int k = 0; k < pchunks; ++k) {
+      std::uint64_t sum = 0;
+      for (std::size_t v = V * std::size_t(k) / std::size_t(pchunks), e = V * std::size_t(k + 1) / std::size_t(pchunks); v < e; ++v)
+        sum += po[v];
+      sc.chunk_sums[std::size_t(k) + 1] = sum;
+    }
+    for (int k = 0; k < pchunks; ++k) sc.chunk_sums[std::size_t(k) + 1] += sc.chunk_sums[std::size_t(k)];
+#pragma omp parallel for schedule(static)
+    for (int k = 0; k < pchunks; ++k) {
+      std::uint64_t sum = sc.chunk_sums[std::size_t(k)];
+      for (std::size_t v = V * std::size_t(k) / std::size_t(pchunks), e = V * std::size_t(k + 1) / std::size_t(pchunks); v < e; ++v)
+        po[v] = sum += po[v];
+    }
+  }
+  const std::uint64_t M = out.pair_offset[V];
+
+  // The order, the tile rectangles and the first pair of each Gaussian in that order, gathered
+  // once so that the passes below read them sequentially. In depth order the ids jump over the
+  // whole model: what a few iterations ahead reads is prefetched (at a million Gaussians nearly
+  // every read would otherwise miss the cache).
   out.order.resize(V);
   sc.rects.resize(V);
+  sc.first_pair.resize(V);
 #pragma omp parallel for schedule(static)
   for (std::int64_t i = 0; i < std::int64_t(V); ++i) {
-    if (i + kBinPrefetch < std::int64_t(V)) __builtin_prefetch(&rects[visible_ids[items[std::size_t(i + kBinPrefetch)].id]]);
-    const std::uint32_t g = visible_ids[items[std::size_t(i)].id];
+    if (i + kBinPrefetch < std::int64_t(V)) {
+      const std::uint32_t vp = items[std::size_t(i + kBinPrefetch)].id;
+      __builtin_prefetch(&rects[visible_ids[vp]]);
+      __builtin_prefetch(&out.pair_offset[vp]);
+    }
+    const std::uint32_t v = items[std::size_t(i)].id, g = visible_ids[v];
     out.order[std::size_t(i)] = g;
     const PixelRect& r = rects[g];
     sc.rects[std::size_t(i)] = {r.x0 / TS, r.y0 / TS, r.x1 / TS, r.y1 / TS};
+    sc.first_pair[std::size_t(i)] = out.pair_offset[v];
   }
-
-  // 2. Pairs per Gaussian (counted in step 1), prefix-summed in id order.
-  for (std::size_t v = 0; v < V; ++v) out.pair_offset[v + 1] += out.pair_offset[v];
-  const std::uint64_t M = out.pair_offset[V];
 
   // 3. Stable counting sort by tile over a fixed number of chunks, handed out one at a time: the
   //    chunks are in depth order, and the near Gaussians cover more tiles than the far ones.
@@ -367,18 +394,14 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
   }
   detail::resize_for_overwrite(out.tile_list, M);  // the scatter below writes every pair
   detail::resize_for_overwrite(out.pair_index, M);
-  // Gaussians go in depth order, their pair offsets in id order: that access jumps, so it is
-  // prefetched D ahead.
 #pragma omp parallel for schedule(dynamic, 1)
   for (int k = 0; k < chunks; ++k) {
     std::uint64_t* cursor = sc.hist.data() + std::size_t(k) * std::size_t(tiles);
     const std::size_t e = chunk_begin(k + 1);
-    constexpr std::size_t D = std::size_t(kBinPrefetch);
     for (std::size_t s = chunk_begin(k); s < e; ++s) {
-      if (s + D < e) __builtin_prefetch(&out.pair_offset[items[s + D].id]);
       const std::uint32_t g = out.order[s];
       const Binning::Scratch::TileRect& r = sc.rects[s];
-      std::uint64_t m = out.pair_offset[items[s].id];
+      std::uint64_t m = sc.first_pair[s];
       for (int ty = r.ty0; ty <= r.ty1; ++ty)
         for (int x = r.tx0; x <= r.tx1; ++x) {
           const std::uint64_t slot = cursor[std::size_t(ty) * tx + std::size_t(x)]++;
