@@ -46,13 +46,7 @@ void* operator new(std::size_t n, const std::nothrow_t&) noexcept {
     return nullptr;
   }
 }
-void* operator new[](std::size_t n, const std::nothrow_t&) noexcept {
-  try {
-    return ::operator new(n);
-  } catch (...) {
-    return nullptr;
-  }
-}
+void* operator new[](std::size_t n, const std::nothrow_t& tag) noexcept { return ::operator new(n, tag); }
 // Everything above comes from malloc or posix_memalign, so free releases it. GCC, seeing free
 // inlined where a new-expression's pointer is deleted, would warn of a mismatch.
 #if defined(__GNUC__) && !defined(__clang__)
