@@ -103,6 +103,7 @@ TEST_CASE("the replacement operator new: large arrays of the program in large pa
   volatile std::size_t impossible = std::size_t(-1) / 2;
   void* none = ::operator new(impossible, std::nothrow);
   CHECK(none == nullptr);
+  CHECK(::operator new[](impossible, std::nothrow) == nullptr);
   CHECK_THROWS_AS((void)::operator new(impossible), std::bad_alloc);
 #endif
 }
