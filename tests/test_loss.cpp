@@ -209,7 +209,8 @@ TEST_CASE("float gradient agrees with the double gradient") {
 TEST_CASE("loss and gradient are bit-identical whatever the thread count") {
   const int saved = omp_get_max_threads();
   // Tall enough for several row blocks, and shorter than the thread count.
-  for (const Size3 s : {Size3{67, 45, 3}, Size3{5, 3, 1}, Size3{1, 1, 7}}) {
+  // Heights that leave partial row groups (of 4) at thread boundaries, and a thread per row.
+  for (const Size3 s : {Size3{67, 45, 3}, Size3{5, 3, 1}, Size3{1, 1, 7}, Size3{9, 23, 7}, Size3{14, 11, 1}}) {
     CAPTURE(s.w); CAPTURE(s.h); CAPTURE(s.c);
     const auto x = random_image<float>(s.w, s.h, s.c, 21);
     const auto y = random_image<float>(s.w, s.h, s.c, 22);
@@ -230,6 +231,68 @@ TEST_CASE("loss and gradient are bit-identical whatever the thread count") {
     }
   }
   omp_set_num_threads(saved);
+}
+
+TEST_CASE("the fused loss pass equals ssim_fwd + L1 + ssim_bwd, bit for bit") {
+  // photometric_loss runs SSIM's forward and backward and the L1 term as one pass over the images;
+  // the separate functions keep the derivative maps in memory. Same operations per value, so the
+  // same bits, for any height (partial row groups, thread halos) and thread count.
+  const int saved = omp_get_max_threads();
+  for (const auto border : {msgs::SsimBorder::same, msgs::SsimBorder::valid})
+    for (const Size3 s : {Size3{1, 1, 1}, Size3{3, 2, 3}, Size3{12, 5, 7}, Size3{17, 13, 1}, Size3{40, 27, 3},
+                          Size3{23, 64, 1}})
+      for (int threads : {1, 2, 3, 7}) {
+        CAPTURE(s.w); CAPTURE(s.h); CAPTURE(s.c); CAPTURE(threads);
+        omp_set_num_threads(threads);
+        const auto x = random_image<float>(s.w, s.h, s.c, 41);
+        const auto y = random_image<float>(s.w, s.h, s.c, 42);
+        msgs::PhotometricLossConfig cfg;
+        cfg.ssim_border = border;
+        Image<float> fused;
+        msgs::SsimWorkspace<float> ws;
+        double mse = 0;
+        const double value = msgs::photometric_loss(x, y, &fused, ws, cfg, &mse);
+        // The same loss from the separate passes.
+        msgs::SsimWorkspace<float> ws2;
+        const double ssim_value = msgs::ssim_fwd(x, y, ws2, true, nullptr, border);
+        const float l1_scale = static_cast<float>(0.8 / static_cast<double>(x.size()));
+        Image<float> separate(s.w, s.h, s.c);
+        double l1 = 0, se = 0;
+        for (std::size_t i = 0; i < x.size(); ++i) {
+          const float d = x.data[i] - y.data[i];
+          separate.data[i] = d > 0 ? l1_scale : (d < 0 ? -l1_scale : 0.0f);
+          l1 += std::abs(static_cast<double>(d));
+          se += (static_cast<double>(x.data[i]) - y.data[i]) * (static_cast<double>(x.data[i]) - y.data[i]);
+        }
+        msgs::ssim_bwd(x, y, ws2, -0.2f, separate);
+        CHECK(fused.data == separate.data);
+        const double expect = 0.8 * (l1 / static_cast<double>(x.size())) + 0.2 * (1.0 - ssim_value);
+        CHECK(value == doctest::Approx(expect).epsilon(1e-12));
+        CHECK(mse == doctest::Approx(se / static_cast<double>(x.size())).epsilon(1e-12));
+        // Without a gradient (the evaluation path) the value is the same.
+        CHECK(msgs::photometric_loss(x, y, static_cast<Image<float>*>(nullptr), ws, cfg) == value);
+      }
+  omp_set_num_threads(saved);
+}
+
+TEST_CASE("per-channel sums of the SSIM map: exact order-independent cases and every channel count") {
+  // channel_sums keeps 16 partial sums per channel; check it against a plain sum in double for
+  // lengths around its block size, and exactly on values whose sums are exact in any order.
+  for (int C : {1, 2, 3, 7, 8, 9, 12})
+    for (std::ptrdiff_t n : {0, 1, 15, 16, 17, 33, 250}) {
+      CAPTURE(C); CAPTURE(n);
+      std::vector<float> p(static_cast<std::size_t>(n * C));
+      std::mt19937 rng(static_cast<std::uint32_t>(C * 1000 + n));
+      std::uniform_int_distribution<int> u(-64, 64);
+      for (auto& v : p) v = static_cast<float>(u(rng)) * 0.125f;  // sums exact in double
+      std::vector<double> got(static_cast<std::size_t>(C), -1.0);
+      msgs::detail::channel_sums(p.data(), n, C, got.data());
+      for (int c = 0; c < C; ++c) {
+        double want = 0;
+        for (std::ptrdiff_t i = 0; i < n; ++i) want += p[static_cast<std::size_t>(i * C + c)];
+        CHECK(got[static_cast<std::size_t>(c)] == want);
+      }
+    }
 }
 
 TEST_CASE("workspace reuse across shapes gives the same result as a fresh one") {

@@ -135,80 +135,150 @@ inline void thread_rows(int n, int& first, int& last) {
   last = static_cast<int>(n * (t + 1) / nt);
 }
 
+/// The window's 11 taps applied to a0..a10, using its symmetry w[k] = w[10 - k] (exact: the weights
+/// are computed from u^2): w0 (a0 + a10) + w1 (a1 + a9) + ... + w4 (a4 + a6) + w5 a5, summed in that
+/// order. Six products instead of eleven; the filter stays exactly symmetric, so it is its own adjoint.
+template <class S>
+inline S ssim_taps(const S* __restrict w, S a0, S a1, S a2, S a3, S a4, S a5, S a6, S a7, S a8, S a9, S a10) {
+  return w[0] * (a0 + a10) + w[1] * (a1 + a9) + w[2] * (a2 + a8) + w[3] * (a3 + a7) + w[4] * (a4 + a6) + w[5] * a5;
+}
+
 /// Horizontal pass over one interleaved row: out[x*C + c] = sum_k w[k] in[(x + k - R)*C + c]. `in` is
-/// padded with R*C zeros on both sides (the reference's zero padding), so every output sums the same 11
-/// terms in the same order (k ascending), and the loop over j vectorises.
+/// padded with R*C zeros on both sides (the reference's zero padding), so every output sums the same
+/// terms in the same order (ssim_taps), and the loop over j vectorises.
 template <class S>
 inline void ssim_hfilter_row(const S* __restrict in, S* __restrict out, std::ptrdiff_t len, int channels,
                              const S* __restrict w) {
-  for (std::ptrdiff_t j = 0; j < len; ++j) {
-    S acc = w[0] * in[j];
-#pragma GCC unroll 10
-    for (int k = 1; k < ssim_window_size; ++k) acc += w[k] * in[j + static_cast<std::ptrdiff_t>(k) * channels];
-    out[j] = acc;
-  }
+  const std::ptrdiff_t c = channels;
+  for (std::ptrdiff_t j = 0; j < len; ++j)
+    out[j] = ssim_taps(w, in[j], in[j + c], in[j + 2 * c], in[j + 3 * c], in[j + 4 * c], in[j + 5 * c], in[j + 6 * c],
+                       in[j + 7 * c], in[j + 8 * c], in[j + 9 * c], in[j + 10 * c]);
 }
 
+/// Output rows the vertical pass computes together: each horizontally filtered row it loads serves
+/// four outputs (14 row reads for 4 rows instead of 44), which is what bounds the pass once the rows
+/// no longer fit in L1.
+inline constexpr int ssim_row_group = 4;
+
 /// Vertical pass for one output row from the 11 horizontally filtered rows around it (a zero row
-/// stands for rows outside the image), summed in k order like the horizontal pass.
+/// stands for rows outside the image), the same taps as the horizontal pass.
 template <class S>
 inline void ssim_vfilter_row(const S* const* rows, S* __restrict out, std::ptrdiff_t len, const S* __restrict w) {
   const S *r0 = rows[0], *r1 = rows[1], *r2 = rows[2], *r3 = rows[3], *r4 = rows[4], *r5 = rows[5], *r6 = rows[6],
           *r7 = rows[7], *r8 = rows[8], *r9 = rows[9], *r10 = rows[10];
   for (std::ptrdiff_t j = 0; j < len; ++j)
-    out[j] = w[0] * r0[j] + w[1] * r1[j] + w[2] * r2[j] + w[3] * r3[j] + w[4] * r4[j] + w[5] * r5[j] +
-             w[6] * r6[j] + w[7] * r7[j] + w[8] * r8[j] + w[9] * r9[j] + w[10] * r10[j];
+    out[j] = ssim_taps(w, r0[j], r1[j], r2[j], r3[j], r4[j], r5[j], r6[j], r7[j], r8[j], r9[j], r10[j]);
 }
 
-/// Per-thread sliding window of horizontally filtered rows for `Q` quantities: slot (row % 11) holds
-/// row `row`, so the 11 rows around an output row are always resident and each is filtered once
-/// (plus a 10-row halo per thread), instead of going through full-size intermediate images.
-/// Lives in caller-provided storage (reused across calls) followed by `extra` values for the caller.
+/// Vertical pass for `g` consecutive output rows (g <= ssim_row_group) from the 10 + g filtered rows
+/// around them; out[i] receives output row i. Every value is the ssim_vfilter_row value, bit for bit.
+template <class S>
+inline void ssim_vfilter_rows(const S* const* rows, S* const* out, int g, std::ptrdiff_t len, const S* __restrict w) {
+  static_assert(ssim_row_group == 4);
+  if (g != 4) {
+    for (int i = 0; i < g; ++i) ssim_vfilter_row(rows + i, out[i], len, w);
+    return;
+  }
+  const S *r0 = rows[0], *r1 = rows[1], *r2 = rows[2], *r3 = rows[3], *r4 = rows[4], *r5 = rows[5], *r6 = rows[6],
+          *r7 = rows[7], *r8 = rows[8], *r9 = rows[9], *r10 = rows[10], *r11 = rows[11], *r12 = rows[12],
+          *r13 = rows[13];
+  S* __restrict o0 = out[0];
+  S* __restrict o1 = out[1];
+  S* __restrict o2 = out[2];
+  S* __restrict o3 = out[3];
+  // The outputs never alias the rows (they are the caller's separate buffers); with this many
+  // pointers GCC would otherwise give up on its runtime alias checks and run the loop scalar.
+#pragma GCC ivdep
+  for (std::ptrdiff_t j = 0; j < len; ++j) {
+    const S a0 = r0[j], a1 = r1[j], a2 = r2[j], a3 = r3[j], a4 = r4[j], a5 = r5[j], a6 = r6[j], a7 = r7[j],
+            a8 = r8[j], a9 = r9[j], a10 = r10[j], a11 = r11[j], a12 = r12[j], a13 = r13[j];
+    o0[j] = ssim_taps(w, a0, a1, a2, a3, a4, a5, a6, a7, a8, a9, a10);
+    o1[j] = ssim_taps(w, a1, a2, a3, a4, a5, a6, a7, a8, a9, a10, a11);
+    o2[j] = ssim_taps(w, a2, a3, a4, a5, a6, a7, a8, a9, a10, a11, a12);
+    o3[j] = ssim_taps(w, a3, a4, a5, a6, a7, a8, a9, a10, a11, a12, a13);
+  }
+}
+
+/// Per-thread sliding window of horizontally filtered rows for `Q` quantities: slot (row % slots)
+/// holds row `row`, so the rows around a group of output rows are always resident and each is
+/// filtered once (plus a 10-row halo per thread), instead of going through full-size intermediate
+/// images. Lives in caller-provided storage (reused across calls) followed by `extra` values for the
+/// caller.
 template <class S, int Q>
 struct SsimRowRing {
+  static constexpr int slots = ssim_window_size + ssim_row_group - 1;
   std::ptrdiff_t len, pad;
   int height;
-  S* ring;    // [Q, 11, len]
+  S* ring;    // [Q, slots, len]
   S* padded;  // [Q, len + 2 pad] inputs of the horizontal pass, zero borders
   S* zero;    // [len]
+  S* edge;    // [2, 3 pad] the ends of an unpadded row with their zeros (filter_unpadded)
   S* extra;   // [extra]
   int next = 0;  // next image row to filter into the ring
 
   SsimRowRing(std::vector<S>& storage, std::ptrdiff_t len_, int channels, int height_, std::ptrdiff_t extra_len)
       : len(len_), pad(static_cast<std::ptrdiff_t>(ssim_window_radius) * channels), height(height_) {
-    const std::ptrdiff_t n_ring = Q * ssim_window_size * len, n_pad = Q * (len + 2 * pad);
-    storage.resize(static_cast<std::size_t>(n_ring + n_pad + len + extra_len));
+    const std::ptrdiff_t n_ring = Q * slots * len, n_pad = Q * (len + 2 * pad);
+    storage.resize(static_cast<std::size_t>(n_ring + n_pad + len + 6 * pad + extra_len));
     ring = storage.data();
     padded = ring + n_ring;
     zero = padded + n_pad;
-    extra = zero + len;
-    std::fill(padded, zero + len, S(0));
+    edge = zero + len;
+    extra = edge + 6 * pad;
+    std::fill(padded, extra, S(0));
   }
 
   /// Interior of the padded input row of quantity q, to be filled before `filter`.
   S* input(int q) { return padded + q * (len + 2 * pad) + pad; }
-  S* slot(int q, int row) { return ring + (q * ssim_window_size + row % ssim_window_size) * len; }
+  S* slot(int q, int row) { return ring + (q * slots + row % slots) * len; }
   /// Horizontal pass of image row `row`: from input(q) (or `src[q]`, padded rows) into its slot.
   void filter(int row, int channels, const S* w, const S* const* src = nullptr) {
     for (int q = 0; q < Q; ++q)
       ssim_hfilter_row((src ? src[q] : input(q)) - pad, slot(q, row), len, channels, w);
   }
-  /// The 11 rows of quantity q around output row r (zero rows outside the image).
-  void rows_around(int q, int r, const S** rows) {
-    for (int k = 0; k < ssim_window_size; ++k) {
+  /// Horizontal pass of quantity q of image row `row` straight from the unpadded row `src` [len]:
+  /// the values of copying it into input(q) and calling `filter`, without the copy. The interior
+  /// reads `src` in place; the R*C outputs at either end read `edge`, where the zeros are.
+  void filter_unpadded(int q, int row, const S* src, int channels, const S* w) {
+    S* out = slot(q, row);
+    if (len < 2 * pad) {
+      std::copy(src, src + len, input(q));
+      ssim_hfilter_row(input(q) - pad, out, len, channels, w);
+      return;
+    }
+    S* left = edge;             // [pad zeros, src[0, 2 pad)]
+    S* right = edge + 3 * pad;  // [src[len - 2 pad, len), pad zeros]
+    std::copy(src, src + 2 * pad, left + pad);
+    std::copy(src + len - 2 * pad, src + len, right);
+    ssim_hfilter_row(left, out, pad, channels, w);
+    ssim_hfilter_row(src, out + pad, len - 2 * pad, channels, w);
+    ssim_hfilter_row(right, out + len - pad, pad, channels, w);
+  }
+  /// The 10 + g rows of quantity q around output rows r .. r + g - 1 (zero rows outside the image).
+  void rows_around(int q, int r, int g, const S** rows) {
+    for (int k = 0; k < ssim_window_size - 1 + g; ++k) {
       const int rr = r + k - ssim_window_radius;
       rows[k] = (rr < 0 || rr >= height) ? zero : slot(q, rr);
     }
   }
+  /// Vertical pass of quantity q for output rows r .. r + g - 1: row i into out + i * out_stride.
+  void vfilter(int q, int r, int g, const S* w, S* out, std::ptrdiff_t out_stride) {
+    const S* rows[ssim_window_size - 1 + ssim_row_group];
+    S* outs[ssim_row_group];
+    rows_around(q, r, g, rows);
+    for (int i = 0; i < g; ++i) outs[i] = out + i * out_stride;
+    ssim_vfilter_rows(rows, outs, g, len, w);
+  }
 };
 
-/// Per-thread scratch vectors of a workspace, one per possible OpenMP thread (call outside parallel).
+/// Per-thread scratch vectors of a workspace, `per_thread` per possible OpenMP thread (call outside
+/// parallel).
 template <class S>
-inline void reserve_thread_scratch(std::vector<std::vector<S>>& scratch) {
+inline void reserve_thread_scratch(std::vector<std::vector<S>>& scratch, std::size_t per_thread = 1) {
 #ifdef _OPENMP
-  const std::size_t n = static_cast<std::size_t>(omp_get_max_threads());
+  const std::size_t n = static_cast<std::size_t>(omp_get_max_threads()) * per_thread;
 #else
-  const std::size_t n = 1;
+  const std::size_t n = per_thread;
 #endif
   if (scratch.size() < n) scratch.resize(n);
 }
@@ -221,44 +291,41 @@ inline int thread_index() {
 #endif
 }
 
-/// Inputs of the forward's horizontal pass for one row: x, y, x^2, y^2, xy.
+/// Products the forward filters besides x and y, for one row: x^2 + y^2 and xy. The map needs E[x^2]
+/// and E[y^2] only as their sum (the variances enter as sigma_x^2 + sigma_y^2), so one filter does.
 template <class S>
-inline void ssim_inputs_row(const S* __restrict xr, const S* __restrict yr, S* __restrict px, S* __restrict py,
-                            S* __restrict pxx, S* __restrict pyy, S* __restrict pxy, std::ptrdiff_t len) {
+inline void ssim_products_row(const S* __restrict xr, const S* __restrict yr, S* __restrict pss, S* __restrict pxy,
+                              std::ptrdiff_t len) {
   for (std::ptrdiff_t j = 0; j < len; ++j) {
-    px[j] = xr[j];
-    py[j] = yr[j];
-    pxx[j] = xr[j] * xr[j];
-    pyy[j] = yr[j] * yr[j];
+    pss[j] = xr[j] * xr[j] + yr[j] * yr[j];
     pxy[j] = xr[j] * yr[j];
   }
 }
 
-/// Filtered statistics of one row ([W*C] each): mu_x, mu_y, E[x^2], E[y^2], E[xy].
-template <class S>
-struct SsimRowStats {
-  const S *mx, *my, *exx, *eyy, *exy;
-};
+/// Quantities the forward filters (x, y, x^2 + y^2, xy) and the backward (the three derivative maps).
+inline constexpr int ssim_fwd_quantities = 4;
+inline constexpr int ssim_bwd_quantities = 3;
 
-/// SSIM map of one row and, with `Keep`, its partial derivatives with respect to mu_x, E[x^2], E[xy]:
+/// SSIM map of one row from its filtered statistics (mu_x, mu_y, E[x^2] + E[y^2], E[xy], rows
+/// `stride` apart) and, with `Keep`, its partial derivatives with respect to mu_x, E[x^2], E[xy]:
 /// S = A1 A2 / (B1 B2), A1 = 2 mx my + C1, A2 = 2 (Exy - mx my) + C2, B1 = mx^2 + my^2 + C1,
-/// B2 = Exx - mx^2 + Eyy - my^2 + C2. Branch-free so that it vectorises.
+/// B2 = (Exx + Eyy) - (mx^2 + my^2) + C2. Branch-free so that it vectorises.
 template <bool Keep, class S>
-inline void ssim_map_row(const SsimRowStats<S>& st, std::ptrdiff_t len, S c1, S c2, S* __restrict smap,
+inline void ssim_map_row(const S* stats, std::ptrdiff_t stride, std::ptrdiff_t len, S c1, S c2, S* __restrict smap,
                          S* __restrict d_mu, S* __restrict d_exx, S* __restrict d_exy) {
-  const S* __restrict mx = st.mx;
-  const S* __restrict my = st.my;
-  const S* __restrict exx = st.exx;
-  const S* __restrict eyy = st.eyy;
-  const S* __restrict exy = st.exy;
+  const S* __restrict mx = stats;
+  const S* __restrict my = stats + stride;
+  const S* __restrict ess = stats + 2 * stride;
+  const S* __restrict exy = stats + 3 * stride;
   for (std::ptrdiff_t j = 0; j < len; ++j) {
     const S ux = mx[j], uy = my[j];
     const S ux2 = ux * ux, uy2 = uy * uy, uxy = ux * uy;
     const S a1 = 2 * uxy + c1;
     const S a2 = 2 * (exy[j] - uxy) + c2;
-    const S b1 = ux2 + uy2 + c1;
+    const S m2 = ux2 + uy2;
+    const S b1 = m2 + c1;
     // Both variances are >= 0 in exact arithmetic (the window weights sum to <= 1), so b2 >= C2 > 0.
-    const S b2 = (exx[j] - ux2) + (eyy[j] - uy2) + c2;
+    const S b2 = (ess[j] - m2) + c2;
     const S inv = S(1) / (b1 * b2);
     const S s = a1 * a2 * inv;
     smap[j] = s;
@@ -270,20 +337,124 @@ inline void ssim_map_row(const SsimRowStats<S>& st, std::ptrdiff_t len, S c1, S 
   }
 }
 
-/// Sum of p[0], p[stride], ... (count terms) in double, four interleaved accumulators combined in a
-/// fixed order: deterministic, and not one long dependency chain.
+/// Filtered statistics of output rows r .. r + g - 1 (g <= ssim_row_group) on a thread's ring:
+/// filters the input rows they need that are not in the ring yet, then runs the vertical pass.
+/// Row i's quantity q lands at stats + (q * ssim_row_group + i) * len.
 template <class S>
-inline double strided_sum(const S* p, std::ptrdiff_t count, std::ptrdiff_t stride) {
-  double a0 = 0, a1 = 0, a2 = 0, a3 = 0;
-  std::ptrdiff_t i = 0;
-  for (; i + 4 <= count; i += 4) {
-    a0 += static_cast<double>(p[i * stride]);
-    a1 += static_cast<double>(p[(i + 1) * stride]);
-    a2 += static_cast<double>(p[(i + 2) * stride]);
-    a3 += static_cast<double>(p[(i + 3) * stride]);
+inline void ssim_fwd_stats(SsimRowRing<S, ssim_fwd_quantities>& ring, const Image<S>& x, const Image<S>& y, int r,
+                           int g, const S* w, S* stats) {
+  const int H = x.height, C = x.channels;
+  const std::ptrdiff_t len = ring.len;
+  for (; ring.next <= std::min(H - 1, r + g - 1 + ssim_window_radius); ++ring.next) {
+    const S* xr = x.data.data() + ring.next * len;
+    const S* yr = y.data.data() + ring.next * len;
+    ssim_products_row(xr, yr, ring.input(2), ring.input(3), len);
+    ring.filter_unpadded(0, ring.next, xr, C, w);
+    ring.filter_unpadded(1, ring.next, yr, C, w);
+    for (int q = 2; q < ssim_fwd_quantities; ++q)
+      ssim_hfilter_row(ring.input(q) - ring.pad, ring.slot(q, ring.next), len, C, w);
   }
-  for (; i < count; ++i) a0 += static_cast<double>(p[i * stride]);
-  return (a0 + a1) + (a2 + a3);
+  for (int q = 0; q < ssim_fwd_quantities; ++q) ring.vfilter(q, r, g, w, stats + q * ssim_row_group * len, len);
+}
+
+/// Row r's SSIM map from its statistics (row i of ssim_fwd_stats: stats + i * len) and, with `Keep`,
+/// its derivative rows, zero outside the pixels the mean covers (which do not depend on x).
+template <bool Keep, class S>
+inline void ssim_fwd_row(const SsimWorkspace<S>& ws, int r, const S* stats, S* smap, S* d_mu, S* d_exx, S* d_exy) {
+  const int C = ws.channels;
+  const std::ptrdiff_t len = static_cast<std::ptrdiff_t>(ws.width) * C;
+  ssim_map_row<Keep>(stats, ssim_row_group * len, len, static_cast<S>(ssim_c1), static_cast<S>(ssim_c2), smap, d_mu,
+                     d_exx, d_exy);
+  if constexpr (Keep) {
+    const bool row_covered = r >= ws.r_lo && r < ws.r_hi;
+    if (!row_covered || ws.c_lo > 0 || ws.c_hi < ws.width) {
+      const std::ptrdiff_t a = row_covered ? std::ptrdiff_t(ws.c_lo) * C : len;
+      const std::ptrdiff_t b = row_covered ? std::ptrdiff_t(ws.c_hi) * C : len;
+      for (S* d : {d_mu, d_exx, d_exy}) {
+        std::fill(d, d + a, S(0));
+        std::fill(d + b, d + len, S(0));
+      }
+    }
+  }
+}
+
+/// Per-channel sums in double of `n` interleaved pixels (p[i * C + c]) into out[0, C): 16 partial
+/// sums per channel (lane l of each block of 16 C values belongs to channel l % C), combined in a
+/// fixed order. Deterministic, and a loop the compiler vectorises (float to double conversions and
+/// adds), unlike a sum per channel with stride C.
+template <class S>
+inline void channel_sums(const S* p, std::ptrdiff_t n, int C, double* out) {
+  constexpr int kLanes = 16, kMaxChannels = 8;
+  for (int c = 0; c < C; ++c) out[c] = 0.0;
+  std::ptrdiff_t i = 0;
+  const std::ptrdiff_t total = n * C;
+  if (C <= kMaxChannels) {
+    double acc[kLanes * kMaxChannels] = {};
+    const std::ptrdiff_t block = static_cast<std::ptrdiff_t>(kLanes) * C;
+    for (; i + block <= total; i += block)
+      for (std::ptrdiff_t l = 0; l < block; ++l) acc[l] += static_cast<double>(p[i + l]);
+    for (int k = 0; k < kLanes; ++k)
+      for (int c = 0; c < C; ++c) out[c] += acc[k * C + c];
+  }
+  // The tail (and every value when C > kMaxChannels) one by one; i is a multiple of C here.
+  for (; i < total; i += C)
+    for (int c = 0; c < C; ++c) out[c] += static_cast<double>(p[i + c]);
+}
+
+/// Checks the images and prepares `ws` for an SSIM pass over them (maps only `with_maps`); false
+/// when the images are empty.
+template <class S>
+bool ssim_begin(const Image<S>& x, const Image<S>& y, SsimWorkspace<S>& ws, bool with_maps, SsimBorder border) {
+  check_image("ssim", "x", x);
+  check_image("ssim", "y", y);
+  check_same_shape("ssim", x.width, x.height, x.channels, y.width, y.height, y.channels);
+  ws.resize(x.width, x.height, x.channels, with_maps);
+  std::tie(ws.r_lo, ws.r_hi) = ssim_covered(x.height, border);
+  std::tie(ws.c_lo, ws.c_hi) = ssim_covered(x.width, border);
+  return !x.data.empty();
+}
+
+/// Sums of row r's SSIM map over the covered columns, per channel, into ws.row_sums.
+template <class S>
+inline void ssim_row_sums(SsimWorkspace<S>& ws, int r, const S* smap) {
+  const int C = ws.channels;
+  double* out = ws.row_sums.data() + static_cast<std::ptrdiff_t>(r) * C;
+  if (r >= ws.r_lo && r < ws.r_hi)
+    channel_sums(smap + std::ptrdiff_t(ws.c_lo) * C, ws.c_hi - ws.c_lo, C, out);
+  else
+    std::fill(out, out + C, 0.0);
+}
+
+/// Mean SSIM from ws.row_sums, in a fixed order: channel sums over rows in row order, then channels
+/// in order. `per_channel` (optional) receives each channel's mean.
+template <class S>
+double ssim_mean(const SsimWorkspace<S>& ws, std::vector<double>* per_channel) {
+  const int C = ws.channels, H = ws.height;
+  if (per_channel) per_channel->assign(static_cast<std::size_t>(C), 0.0);
+  if (ws.covered() == 0) return 0.0;
+  double total = 0;
+  for (int c = 0; c < C; ++c) {
+    double sc = 0;
+    for (int r = 0; r < H; ++r)
+      sc += ws.row_sums[static_cast<std::size_t>(r) * static_cast<std::size_t>(C) + static_cast<std::size_t>(c)];
+    if (per_channel)
+      (*per_channel)[static_cast<std::size_t>(c)] = sc / static_cast<double>(ws.covered() / static_cast<std::size_t>(C));
+    total += sc;
+  }
+  return total / static_cast<double>(ws.covered());
+}
+
+/// The backward's filtered derivative maps of output rows r .. r + g - 1 from the thread's ring:
+/// row i's map q at f + (q * ssim_row_group + i) * len.
+template <class S>
+inline void ssim_bwd_filtered_rows(SsimRowRing<S, ssim_bwd_quantities>& ring, int r, int g, const S* w, S* f) {
+  for (int q = 0; q < ssim_bwd_quantities; ++q) ring.vfilter(q, r, g, w, f + q * ssim_row_group * ring.len, ring.len);
+}
+
+/// The SSIM gradient of one pixel value from the filtered derivative maps (see ssim_bwd).
+template <class S>
+inline S ssim_grad_value(S fa, S fb, S fc, S x, S y) {
+  return fa + 2 * x * fb + y * fc;
 }
 
 }  // namespace detail
@@ -298,23 +469,17 @@ inline double strided_sum(const S* p, std::ptrdiff_t count, std::ptrdiff_t strid
 template <class S>
 double ssim_fwd(const Image<S>& x, const Image<S>& y, SsimWorkspace<S>& ws, bool keep_for_bwd = false,
                 std::vector<double>* per_channel = nullptr, SsimBorder border = SsimBorder::same) {
-  detail::check_image("ssim", "x", x);
-  detail::check_image("ssim", "y", y);
-  detail::check_same_shape("ssim", x.width, x.height, x.channels, y.width, y.height, y.channels);
-  const int W = x.width, H = x.height, C = x.channels;
-  ws.resize(W, H, C, keep_for_bwd);
-  std::tie(ws.r_lo, ws.r_hi) = ssim_covered(H, border);
-  std::tie(ws.c_lo, ws.c_hi) = ssim_covered(W, border);
-  if (per_channel) per_channel->assign(static_cast<std::size_t>(C), 0.0);
-  if (x.data.empty()) {
+  if (!detail::ssim_begin(x, y, ws, keep_for_bwd, border)) {
+    if (per_channel) per_channel->assign(static_cast<std::size_t>(x.channels), 0.0);
     ws.has_bwd_state = keep_for_bwd;
     return 0.0;
   }
-  const std::ptrdiff_t len = static_cast<std::ptrdiff_t>(W) * C;
+  constexpr int G = detail::ssim_row_group;
+  const int H = x.height, C = x.channels;
+  const std::ptrdiff_t len = static_cast<std::ptrdiff_t>(x.width) * C;
   const std::ptrdiff_t ms = ws.map_stride(), mpad = static_cast<std::ptrdiff_t>(ssim_window_radius) * C;
   const auto win = ssim_window_1d<S>();
   const S* w = win.data();
-  const S c1 = static_cast<S>(ssim_c1), c2 = static_cast<S>(ssim_c2);
   detail::reserve_thread_scratch(ws.thread_scratch);
 
 #pragma omp parallel
@@ -322,59 +487,30 @@ double ssim_fwd(const Image<S>& x, const Image<S>& y, SsimWorkspace<S>& ws, bool
     int r0 = 0, r1 = 0;
     detail::thread_rows(H, r0, r1);
     if (r0 < r1) {
-      // Quantities 0..4: x, y, x^2, y^2, xy; extra: 5 filtered statistics rows and the SSIM map row.
-      detail::SsimRowRing<S, 5> ring(ws.thread_scratch[static_cast<std::size_t>(detail::thread_index())], len, C, H,
-                                     6 * len);
+      // extra: the statistics of a group of rows and the SSIM map row.
+      detail::SsimRowRing<S, detail::ssim_fwd_quantities> ring(
+          ws.thread_scratch[static_cast<std::size_t>(detail::thread_index())], len, C, H,
+          (detail::ssim_fwd_quantities * G + 1) * len);
       S* stats = ring.extra;
-      S* smap = ring.extra + 5 * len;
-      const S* rows[ssim_window_size];
+      S* smap = ring.extra + detail::ssim_fwd_quantities * G * len;
       ring.next = std::max(0, r0 - ssim_window_radius);
-      for (int r = r0; r < r1; ++r) {
-        for (; ring.next <= std::min(H - 1, r + ssim_window_radius); ++ring.next) {
-          detail::ssim_inputs_row(x.data.data() + ring.next * len, y.data.data() + ring.next * len, ring.input(0),
-                                  ring.input(1), ring.input(2), ring.input(3), ring.input(4), len);
-          ring.filter(ring.next, C, w);
+      for (int r = r0; r < r1; r += G) {
+        const int g = std::min(G, r1 - r);
+        detail::ssim_fwd_stats(ring, x, y, r, g, w, stats);
+        for (int i = 0; i < g; ++i) {
+          const std::ptrdiff_t o = (r + i) * ms + mpad;
+          if (keep_for_bwd)
+            detail::ssim_fwd_row<true>(ws, r + i, stats + i * len, smap, ws.d_mu.data() + o, ws.d_exx.data() + o,
+                                       ws.d_exy.data() + o);
+          else
+            detail::ssim_fwd_row<false, S>(ws, r + i, stats + i * len, smap, nullptr, nullptr, nullptr);
+          detail::ssim_row_sums(ws, r + i, smap);
         }
-        for (int q = 0; q < 5; ++q) {
-          ring.rows_around(q, r, rows);
-          detail::ssim_vfilter_row(rows, stats + q * len, len, w);
-        }
-        const detail::SsimRowStats<S> st{stats, stats + len, stats + 2 * len, stats + 3 * len, stats + 4 * len};
-        const std::ptrdiff_t o = r * ms + mpad;
-        if (keep_for_bwd)
-          detail::ssim_map_row<true>(st, len, c1, c2, smap, ws.d_mu.data() + o, ws.d_exx.data() + o,
-                                     ws.d_exy.data() + o);
-        else
-          detail::ssim_map_row<false, S>(st, len, c1, c2, smap, nullptr, nullptr, nullptr);
-        const bool row_covered = r >= ws.r_lo && r < ws.r_hi;
-        if (keep_for_bwd && (!row_covered || ws.c_lo > 0 || ws.c_hi < W)) {
-          // Pixels outside the mean do not depend on x: their derivatives are 0.
-          const std::ptrdiff_t a = row_covered ? std::ptrdiff_t(ws.c_lo) * C : len;
-          const std::ptrdiff_t b = row_covered ? std::ptrdiff_t(ws.c_hi) * C : len;
-          for (S* d : {ws.d_mu.data() + o, ws.d_exx.data() + o, ws.d_exy.data() + o}) {
-            std::fill(d, d + a, S(0));
-            std::fill(d + b, d + len, S(0));
-          }
-        }
-        for (int c = 0; c < C; ++c)
-          ws.row_sums[static_cast<std::size_t>(r) * static_cast<std::size_t>(C) + static_cast<std::size_t>(c)] =
-              row_covered ? detail::strided_sum(smap + std::ptrdiff_t(ws.c_lo) * C + c, ws.c_hi - ws.c_lo, C) : 0.0;
       }
     }
   }
   ws.has_bwd_state = keep_for_bwd;
-
-  // Fixed-order reduction: channel sums over rows in row order, then channels in order.
-  double total = 0;
-  for (int c = 0; c < C; ++c) {
-    double sc = 0;
-    for (int r = 0; r < H; ++r)
-      sc += ws.row_sums[static_cast<std::size_t>(r) * static_cast<std::size_t>(C) + static_cast<std::size_t>(c)];
-    if (per_channel)
-      (*per_channel)[static_cast<std::size_t>(c)] = sc / static_cast<double>(ws.covered() / static_cast<std::size_t>(C));
-    total += sc;
-  }
-  return total / static_cast<double>(ws.covered());
+  return detail::ssim_mean(ws, per_channel);
 }
 
 /// SSIM backward: `grad_x += scale * d(mean SSIM)/dx` for the images of the last
@@ -391,6 +527,7 @@ void ssim_bwd(const Image<S>& x, const Image<S>& y, SsimWorkspace<S>& ws, S scal
   if (!ws.has_bwd_state || ws.width != x.width || ws.height != x.height || ws.channels != x.channels)
     throw std::logic_error("ssim_bwd: call ssim_fwd(x, y, ws, /*keep_for_bwd=*/true) on the same images first");
   if (x.data.empty()) return;
+  constexpr int G = detail::ssim_row_group;
   const int W = x.width, H = x.height, C = x.channels;
   const std::ptrdiff_t len = static_cast<std::ptrdiff_t>(W) * C;
   const auto win = ssim_window_1d<S>();
@@ -403,30 +540,31 @@ void ssim_bwd(const Image<S>& x, const Image<S>& y, SsimWorkspace<S>& ws, S scal
     int r0 = 0, r1 = 0;
     detail::thread_rows(H, r0, r1);
     if (r0 < r1) {
-      // Quantities 0..2: d_mu, d_exx, d_exy, read in place from the padded maps; extra: 3 filtered rows.
-      detail::SsimRowRing<S, 3> ring(ws.thread_scratch[static_cast<std::size_t>(detail::thread_index())], len, C, H,
-                                     3 * len);
+      // The maps are read in place (they are padded); extra: the filtered maps of a group of rows.
+      detail::SsimRowRing<S, detail::ssim_bwd_quantities> ring(
+          ws.thread_scratch[static_cast<std::size_t>(detail::thread_index())], len, C, H,
+          detail::ssim_bwd_quantities * G * len);
       S* f = ring.extra;
-      const S* rows[ssim_window_size];
       ring.next = std::max(0, r0 - ssim_window_radius);
-      for (int r = r0; r < r1; ++r) {
-        for (; ring.next <= std::min(H - 1, r + ssim_window_radius); ++ring.next) {
+      for (int r = r0; r < r1; r += G) {
+        const int g = std::min(G, r1 - r);
+        for (; ring.next <= std::min(H - 1, r + g - 1 + ssim_window_radius); ++ring.next) {
           const std::ptrdiff_t o = ring.next * ms + mpad;
           const S* src[3] = {ws.d_mu.data() + o, ws.d_exx.data() + o, ws.d_exy.data() + o};
           ring.filter(ring.next, C, w, src);
         }
-        for (int q = 0; q < 3; ++q) {
-          ring.rows_around(q, r, rows);
-          detail::ssim_vfilter_row(rows, f + q * len, len, w);
+        detail::ssim_bwd_filtered_rows(ring, r, g, w, f);
+        for (int i = 0; i < g; ++i) {
+          const std::ptrdiff_t o = (r + i) * len;
+          const S* __restrict xr = x.data.data() + o;
+          const S* __restrict yr = y.data.data() + o;
+          const S* __restrict fa = f + i * len;
+          const S* __restrict fb = f + (G + i) * len;
+          const S* __restrict fc = f + (2 * G + i) * len;
+          S* __restrict gr = grad_x.data.data() + o;
+          for (std::ptrdiff_t j = 0; j < len; ++j)
+            gr[j] += k * detail::ssim_grad_value(fa[j], fb[j], fc[j], xr[j], yr[j]);
         }
-        const std::ptrdiff_t o = r * len;
-        const S* __restrict xr = x.data.data() + o;
-        const S* __restrict yr = y.data.data() + o;
-        const S* __restrict fa = f;
-        const S* __restrict fb = f + len;
-        const S* __restrict fc = f + 2 * len;
-        S* __restrict gr = grad_x.data.data() + o;
-        for (std::ptrdiff_t j = 0; j < len; ++j) gr[j] += k * (fa[j] + 2 * xr[j] * fb[j] + yr[j] * fc[j]);
       }
     }
   }
@@ -442,11 +580,125 @@ struct PhotometricLossConfig {
   SsimBorder ssim_border = SsimBorder::same;  ///< pixels of the SSIM mean (valid: the multi-spectral implementation)
 };
 
+namespace detail {
+
+/// Sum of |x - y| over one row and, with `se`, of (x - y)^2 in double, in fixed-order partial sums
+/// (as strided_sum).
+template <class S>
+inline void l1_row_sums(const S* xr, const S* yr, std::ptrdiff_t len, double& l1, double* se) {
+  double a0 = 0, a1 = 0, a2 = 0, a3 = 0;
+  std::ptrdiff_t j = 0;
+  for (; j + 4 <= len; j += 4) {
+    a0 += static_cast<double>(std::abs(xr[j] - yr[j]));
+    a1 += static_cast<double>(std::abs(xr[j + 1] - yr[j + 1]));
+    a2 += static_cast<double>(std::abs(xr[j + 2] - yr[j + 2]));
+    a3 += static_cast<double>(std::abs(xr[j + 3] - yr[j + 3]));
+  }
+  for (; j < len; ++j) a0 += static_cast<double>(std::abs(xr[j] - yr[j]));
+  l1 = (a0 + a1) + (a2 + a3);
+  if (se) {
+    double e0 = 0, e1 = 0, e2 = 0, e3 = 0;
+    const auto sq = [&](std::ptrdiff_t i) {
+      const double d = static_cast<double>(xr[i]) - static_cast<double>(yr[i]);
+      return d * d;
+    };
+    for (j = 0; j + 4 <= len; j += 4) {
+      e0 += sq(j);
+      e1 += sq(j + 1);
+      e2 += sq(j + 2);
+      e3 += sq(j + 3);
+    }
+    for (; j < len; ++j) e0 += sq(j);
+    *se = (e0 + e1) + (e2 + e3);
+  }
+}
+
+/// Derivative of scale |x - y| with respect to x; 0 at a tie (as torch.sign).
+template <class S>
+inline S l1_grad(S x, S y, S scale) {
+  const S d = x - y;
+  return d > 0 ? scale : (d < 0 ? -scale : S(0));
+}
+
+/// SSIM forward and backward in one pass over the images, with the L1 term of the photometric
+/// loss: grad = l1_scale sign(x - y) + ssim_scale d(mean SSIM)/dx (overwritten), row_l1[r] and
+/// (optional) row_se[r] the row sums of |x - y| and (x - y)^2; returns the mean SSIM.
+///
+/// Each thread runs the forward over its rows plus a halo of R rows on either side and feeds every
+/// derivative row straight into the backward's horizontal pass, R rows behind: the derivative maps
+/// never go to memory, and x and y are read while their rows are still in cache. The values are
+/// those of ssim_fwd followed by ssim_bwd, bit for bit (the same operations on every row, whichever
+/// thread computes it), so this path is as deterministic.
+template <class S>
+double ssim_fwd_bwd_with_l1(const Image<S>& x, const Image<S>& y, SsimWorkspace<S>& ws, SsimBorder border,
+                            S ssim_scale, S l1_scale, Image<S>& grad, double* row_l1, double* row_se) {
+  if (!ssim_begin(x, y, ws, false, border)) return 0.0;
+  constexpr int R = ssim_window_radius;
+  const int H = x.height, C = x.channels;
+  const std::ptrdiff_t len = static_cast<std::ptrdiff_t>(x.width) * C;
+  const auto win = ssim_window_1d<S>();
+  const S* w = win.data();
+  const S k = ssim_scale / static_cast<S>(ws.covered());
+  reserve_thread_scratch(ws.thread_scratch, 2);
+  constexpr int G = ssim_row_group;
+#pragma omp parallel
+  {
+    int r0 = 0, r1 = 0;
+    thread_rows(H, r0, r1);
+    if (r0 < r1) {
+      const std::size_t t = 2 * static_cast<std::size_t>(thread_index());
+      // Forward extra: the statistics of a group of rows and the SSIM map row. Backward: its padded
+      // inputs are the derivative rows, written there by the forward; extra: a group's filtered maps.
+      SsimRowRing<S, ssim_fwd_quantities> fr(ws.thread_scratch[t], len, C, H, (ssim_fwd_quantities * G + 1) * len);
+      SsimRowRing<S, ssim_bwd_quantities> br(ws.thread_scratch[t + 1], len, C, H, ssim_bwd_quantities * G * len);
+      S* stats = fr.extra;
+      S* smap = fr.extra + ssim_fwd_quantities * G * len;
+      S* f = br.extra;
+      const int f0 = std::max(0, r0 - R), f1 = std::min(H, r1 + R);
+      fr.next = std::max(0, f0 - R);
+      int rb = r0;  // first output row of the backward's next group
+      for (int rf = f0; rf < f1; rf += G) {
+        const int g = std::min(G, f1 - rf);
+        ssim_fwd_stats(fr, x, y, rf, g, w, stats);
+        for (int i = 0; i < g; ++i) {
+          const int r = rf + i;
+          ssim_fwd_row<true>(ws, r, stats + i * len, smap, br.input(0), br.input(1), br.input(2));
+          if (r >= r0 && r < r1) ssim_row_sums(ws, r, smap);
+          br.filter(r, C, w);
+          // Each backward group as soon as the derivative rows it needs are filtered (the ring
+          // holds the last 10 + G of them, as many as a group needs).
+          for (int gb = std::min(G, r1 - rb); rb < r1 && std::min(H - 1, rb + gb - 1 + R) <= r;
+               rb += gb, gb = std::min(G, r1 - rb)) {
+            ssim_bwd_filtered_rows(br, rb, gb, w, f);
+            for (int ib = 0; ib < gb; ++ib) {
+              const std::ptrdiff_t o = (rb + ib) * len;
+              const S* __restrict xr = x.data.data() + o;
+              const S* __restrict yr = y.data.data() + o;
+              const S* __restrict fa = f + ib * len;
+              const S* __restrict fb = f + (G + ib) * len;
+              const S* __restrict fc = f + (2 * G + ib) * len;
+              S* __restrict gr = grad.data.data() + o;
+              for (std::ptrdiff_t j = 0; j < len; ++j)
+                gr[j] = l1_grad(xr[j], yr[j], l1_scale) + k * ssim_grad_value(fa[j], fb[j], fc[j], xr[j], yr[j]);
+              l1_row_sums(xr, yr, len, row_l1[rb + ib], row_se ? row_se + rb + ib : nullptr);
+            }
+          }
+        }
+      }
+    }
+  }
+  return ssim_mean(ws, nullptr);
+}
+
+}  // namespace detail
+
 /// Value of the photometric loss and, when `grad_render` is non-null, its gradient with respect to
 /// `render` (overwritten, resized to the render's shape). L1 is the mean absolute difference over
 /// pixels and channels; its derivative at a tie is 0 (as torch.sign). `ws` is scratch space.
 /// `mse` (optional) receives the mean squared difference over pixels and channels, summed in the
 /// same pass as L1 (a training step's PSNR, psnr_from_mse, without a serial pass of its own).
+/// With a gradient, SSIM's forward and backward and the L1 term run as one pass
+/// (detail::ssim_fwd_bwd_with_l1): the same values as ssim_fwd + ssim_bwd, without their maps.
 template <class S>
 double photometric_loss(const Image<S>& render, const Image<S>& gt, Image<S>* grad_render, SsimWorkspace<S>& ws,
                         const PhotometricLossConfig& cfg = {}, double* mse = nullptr) {
@@ -455,68 +707,39 @@ double photometric_loss(const Image<S>& render, const Image<S>& gt, Image<S>* gr
   detail::check_same_shape("photometric_loss", render.width, render.height, render.channels, gt.width, gt.height,
                            gt.channels);
   const bool want_grad = grad_render != nullptr;
-  const double ssim_value = ssim_fwd(render, gt, ws, want_grad, nullptr, cfg.ssim_border);
-  if (render.data.empty()) {
-    if (want_grad) grad_render->reset(render.width, render.height, render.channels);
-    if (mse) *mse = 0.0;
-    return 0.0;
-  }
   const double lambda = cfg.ssim_weight;
   const int H = render.height;
   const std::ptrdiff_t len = static_cast<std::ptrdiff_t>(render.width) * render.channels;
-  // Every gradient value is written below, so only reshape (no fill) when needed.
+  // Every gradient value is written, so only reshape (no fill) when needed.
   if (want_grad && (grad_render->width != render.width || grad_render->height != render.height ||
                     grad_render->channels != render.channels || grad_render->size() != render.size()))
     grad_render->reset(render.width, render.height, render.channels);
-  const S l1_scale = static_cast<S>((1.0 - lambda) / static_cast<double>(render.size()));
   std::vector<double> row_l1(static_cast<std::size_t>(H)), row_se(mse ? static_cast<std::size_t>(H) : 0);
+  double* se = mse ? row_se.data() : nullptr;
+  double ssim_value = 0;
+  if (want_grad) {
+    const S l1_scale = static_cast<S>((1.0 - lambda) / static_cast<double>(std::max<std::size_t>(render.size(), 1)));
+    ssim_value = detail::ssim_fwd_bwd_with_l1(render, gt, ws, cfg.ssim_border, static_cast<S>(-lambda), l1_scale,
+                                              *grad_render, row_l1.data(), se);
+  } else {
+    ssim_value = ssim_fwd(render, gt, ws, false, nullptr, cfg.ssim_border);
 #pragma omp parallel for schedule(static)
-  for (int r = 0; r < H; ++r) {
-    const std::ptrdiff_t o = r * len;
-    const S* xr = render.data.data() + o;
-    const S* yr = gt.data.data() + o;
-    double a0 = 0, a1 = 0, a2 = 0, a3 = 0;  // fixed-order partial sums, as detail::strided_sum
-    std::ptrdiff_t j = 0;
-    for (; j + 4 <= len; j += 4) {
-      a0 += static_cast<double>(std::abs(xr[j] - yr[j]));
-      a1 += static_cast<double>(std::abs(xr[j + 1] - yr[j + 1]));
-      a2 += static_cast<double>(std::abs(xr[j + 2] - yr[j + 2]));
-      a3 += static_cast<double>(std::abs(xr[j + 3] - yr[j + 3]));
-    }
-    for (; j < len; ++j) a0 += static_cast<double>(std::abs(xr[j] - yr[j]));
-    row_l1[static_cast<std::size_t>(r)] = (a0 + a1) + (a2 + a3);
-    if (mse) {
-      double e0 = 0, e1 = 0, e2 = 0, e3 = 0;
-      const auto sq = [&](std::ptrdiff_t i) {
-        const double d = static_cast<double>(xr[i]) - static_cast<double>(yr[i]);
-        return d * d;
-      };
-      for (j = 0; j + 4 <= len; j += 4) {
-        e0 += sq(j);
-        e1 += sq(j + 1);
-        e2 += sq(j + 2);
-        e3 += sq(j + 3);
-      }
-      for (; j < len; ++j) e0 += sq(j);
-      row_se[static_cast<std::size_t>(r)] = (e0 + e1) + (e2 + e3);
-    }
-    if (want_grad) {
-      S* gr = grad_render->data.data() + o;
-      for (std::ptrdiff_t i = 0; i < len; ++i) {
-        const S d = xr[i] - yr[i];
-        gr[i] = d > 0 ? l1_scale : (d < 0 ? -l1_scale : S(0));
-      }
-    }
+    for (int r = 0; r < H; ++r)
+      detail::l1_row_sums(render.data.data() + r * len, gt.data.data() + r * len, len,
+                          row_l1[static_cast<std::size_t>(r)], se ? se + r : nullptr);
+  }
+  if (render.data.empty()) {
+    if (mse) *mse = 0.0;
+    return 0.0;
   }
   double l1 = 0;
   for (double v : row_l1) l1 += v;
   l1 /= static_cast<double>(render.size());
   if (mse) {
-    double se = 0;
-    for (double v : row_se) se += v;
-    *mse = se / static_cast<double>(render.size());
+    double s = 0;
+    for (double v : row_se) s += v;
+    *mse = s / static_cast<double>(render.size());
   }
-  if (want_grad) ssim_bwd(render, gt, ws, static_cast<S>(-lambda), *grad_render);
   return (1.0 - lambda) * l1 + lambda * (1.0 - ssim_value);
 }
 
