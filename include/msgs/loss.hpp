@@ -457,6 +457,33 @@ inline S ssim_grad_value(S fa, S fb, S fc, S x, S y) {
   return fa + 2 * x * fb + y * fc;
 }
 
+/// Derivative of scale |x - y| with respect to x; 0 at a tie (as torch.sign).
+template <class S>
+inline S l1_grad(S x, S y, S scale) {
+  const S d = x - y;
+  return d > 0 ? scale : (d < 0 ? -scale : S(0));
+}
+
+/// Gradient row r of the SSIM backward, the i-th of a group whose filtered maps are at f
+/// (ssim_bwd_filtered_rows): gr += k dSSIM/dx, or with `WithL1` gr = l1_grad + k dSSIM/dx.
+template <bool WithL1, class S>
+inline void ssim_grad_row(const Image<S>& x, const Image<S>& y, int r, const S* f, int i, S k, S l1_scale,
+                          S* grad) {
+  const std::ptrdiff_t len = static_cast<std::ptrdiff_t>(x.width) * x.channels, o = r * len;
+  const S* __restrict xr = x.data.data() + o;
+  const S* __restrict yr = y.data.data() + o;
+  const S* __restrict fa = f + i * len;
+  const S* __restrict fb = f + (ssim_row_group + i) * len;
+  const S* __restrict fc = f + (2 * ssim_row_group + i) * len;
+  S* __restrict gr = grad + o;
+  for (std::ptrdiff_t j = 0; j < len; ++j) {
+    if constexpr (WithL1)
+      gr[j] = l1_grad(xr[j], yr[j], l1_scale) + k * ssim_grad_value(fa[j], fb[j], fc[j], xr[j], yr[j]);
+    else
+      gr[j] += k * ssim_grad_value(fa[j], fb[j], fc[j], xr[j], yr[j]);
+  }
+}
+
 }  // namespace detail
 
 /// SSIM forward: mean over pixels and channels of the SSIM map of `x` against `y` ([H, W, C], any C),
@@ -554,17 +581,7 @@ void ssim_bwd(const Image<S>& x, const Image<S>& y, SsimWorkspace<S>& ws, S scal
           ring.filter(ring.next, C, w, src);
         }
         detail::ssim_bwd_filtered_rows(ring, r, g, w, f);
-        for (int i = 0; i < g; ++i) {
-          const std::ptrdiff_t o = (r + i) * len;
-          const S* __restrict xr = x.data.data() + o;
-          const S* __restrict yr = y.data.data() + o;
-          const S* __restrict fa = f + i * len;
-          const S* __restrict fb = f + (G + i) * len;
-          const S* __restrict fc = f + (2 * G + i) * len;
-          S* __restrict gr = grad_x.data.data() + o;
-          for (std::ptrdiff_t j = 0; j < len; ++j)
-            gr[j] += k * detail::ssim_grad_value(fa[j], fb[j], fc[j], xr[j], yr[j]);
-        }
+        for (int i = 0; i < g; ++i) detail::ssim_grad_row<false>(x, y, r + i, f, i, k, S(0), grad_x.data.data());
       }
     }
   }
@@ -611,13 +628,6 @@ inline void l1_row_sums(const S* xr, const S* yr, std::ptrdiff_t len, double& l1
     for (; j < len; ++j) e0 += sq(j);
     *se = (e0 + e1) + (e2 + e3);
   }
-}
-
-/// Derivative of scale |x - y| with respect to x; 0 at a tie (as torch.sign).
-template <class S>
-inline S l1_grad(S x, S y, S scale) {
-  const S d = x - y;
-  return d > 0 ? scale : (d < 0 ? -scale : S(0));
 }
 
 /// SSIM forward and backward in one pass over the images, with the L1 term of the photometric
@@ -671,16 +681,10 @@ double ssim_fwd_bwd_with_l1(const Image<S>& x, const Image<S>& y, SsimWorkspace<
                rb += gb, gb = std::min(G, r1 - rb)) {
             ssim_bwd_filtered_rows(br, rb, gb, w, f);
             for (int ib = 0; ib < gb; ++ib) {
+              ssim_grad_row<true>(x, y, rb + ib, f, ib, k, l1_scale, grad.data.data());
               const std::ptrdiff_t o = (rb + ib) * len;
-              const S* __restrict xr = x.data.data() + o;
-              const S* __restrict yr = y.data.data() + o;
-              const S* __restrict fa = f + ib * len;
-              const S* __restrict fb = f + (G + ib) * len;
-              const S* __restrict fc = f + (2 * G + ib) * len;
-              S* __restrict gr = grad.data.data() + o;
-              for (std::ptrdiff_t j = 0; j < len; ++j)
-                gr[j] = l1_grad(xr[j], yr[j], l1_scale) + k * ssim_grad_value(fa[j], fb[j], fc[j], xr[j], yr[j]);
-              l1_row_sums(xr, yr, len, row_l1[rb + ib], row_se ? row_se + rb + ib : nullptr);
+              l1_row_sums(x.data.data() + o, y.data.data() + o, len, row_l1[rb + ib],
+                          row_se ? row_se + rb + ib : nullptr);
             }
           }
         }
