@@ -240,7 +240,7 @@ TEST_CASE("the fused loss pass equals ssim_fwd + L1 + ssim_bwd, bit for bit") {
   const int saved = omp_get_max_threads();
   for (const auto border : {msgs::SsimBorder::same, msgs::SsimBorder::valid})
     for (const Size3 s : {Size3{1, 1, 1}, Size3{3, 2, 3}, Size3{12, 5, 7}, Size3{17, 13, 1}, Size3{40, 27, 3},
-                          Size3{23, 64, 1}})
+                          Size3{23, 64, 1}, Size3{6, 19, 9}})
       for (int threads : {1, 2, 3, 7}) {
         CAPTURE(s.w); CAPTURE(s.h); CAPTURE(s.c); CAPTURE(threads);
         omp_set_num_threads(threads);
