@@ -599,8 +599,8 @@ struct PhotometricLossConfig {
 
 namespace detail {
 
-/// Sum of |x - y| over one row and, with `se`, of (x - y)^2 in double, in fixed-order partial sums
-/// (as strided_sum).
+/// Sum of |x - y| over one row and, with `se`, of (x - y)^2 in double: four partial sums combined in
+/// a fixed order (deterministic, and not one long dependency chain).
 template <class S>
 inline void l1_row_sums(const S* xr, const S* yr, std::ptrdiff_t len, double& l1, double* se) {
   double a0 = 0, a1 = 0, a2 = 0, a3 = 0;
