@@ -78,7 +78,7 @@ struct SsimWorkspace {
   int width = 0, height = 0, channels = 0;
   std::vector<S> d_mu, d_exx, d_exy;  ///< [H, W*C + 2 R C] dSSIM(p)/d mu_x(p), /d E[x^2](p), /d E[xy](p)
   std::vector<double> row_sums;       ///< [H, C] sum over x of the SSIM map, per row and channel
-  std::vector<std::vector<S>> thread_scratch;  ///< one per OpenMP thread: row ring and row buffers
+  std::vector<std::vector<S>> thread_scratch;  ///< per OpenMP thread: its row rings and row buffers (two in the fused loss pass)
   bool has_bwd_state = false;         ///< d_* hold the maps of the last forward
   /// The pixels the last forward averaged over (ssim_covered): rows [r_lo, r_hi), columns [c_lo, c_hi).
   int r_lo = 0, r_hi = 0, c_lo = 0, c_hi = 0;
