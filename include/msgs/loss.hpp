@@ -231,10 +231,14 @@ struct SsimRowRing {
   /// Interior of the padded input row of quantity q, to be filled before `filter`.
   S* input(int q) { return padded + q * (len + 2 * pad) + pad; }
   S* slot(int q, int row) { return ring + (q * slots + row % slots) * len; }
-  /// Horizontal pass of image row `row`: from input(q) (or `src[q]`, padded rows) into its slot.
+  /// Horizontal pass of quantity q of image row `row` into its slot: from input(q), or from `src`,
+  /// the interior of a row padded like it.
+  void filter_padded(int q, int row, int channels, const S* w, const S* src = nullptr) {
+    ssim_hfilter_row((src ? src : input(q)) - pad, slot(q, row), len, channels, w);
+  }
+  /// filter_padded for every quantity (from `src[q]` when given).
   void filter(int row, int channels, const S* w, const S* const* src = nullptr) {
-    for (int q = 0; q < Q; ++q)
-      ssim_hfilter_row((src ? src[q] : input(q)) - pad, slot(q, row), len, channels, w);
+    for (int q = 0; q < Q; ++q) filter_padded(q, row, channels, w, src ? src[q] : nullptr);
   }
   /// Horizontal pass of quantity q of image row `row` straight from the unpadded row `src` [len]:
   /// the values of copying it into input(q) and calling `filter`, without the copy. The interior
@@ -243,7 +247,7 @@ struct SsimRowRing {
     S* out = slot(q, row);
     if (len < 2 * pad) {
       std::copy(src, src + len, input(q));
-      ssim_hfilter_row(input(q) - pad, out, len, channels, w);
+      filter_padded(q, row, channels, w);
       return;
     }
     S* left = edge;             // [pad zeros, src[0, 2 pad)]
@@ -351,8 +355,7 @@ inline void ssim_fwd_stats(SsimRowRing<S, ssim_fwd_quantities>& ring, const Imag
     ssim_products_row(xr, yr, ring.input(2), ring.input(3), len);
     ring.filter_unpadded(0, ring.next, xr, C, w);
     ring.filter_unpadded(1, ring.next, yr, C, w);
-    for (int q = 2; q < ssim_fwd_quantities; ++q)
-      ssim_hfilter_row(ring.input(q) - ring.pad, ring.slot(q, ring.next), len, C, w);
+    for (int q = 2; q < ssim_fwd_quantities; ++q) ring.filter_padded(q, ring.next, C, w);
   }
   for (int q = 0; q < ssim_fwd_quantities; ++q) ring.vfilter(q, r, g, w, stats + q * ssim_row_group * len, len);
 }
