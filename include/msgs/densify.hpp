@@ -699,9 +699,9 @@ class DensityStats {
     if (bands < 1) throw std::invalid_argument("DensityStats: bands must be >= 1, got " + std::to_string(bands));
     n_ = n;
     bands_ = bands;
-    grad_.assign(n * static_cast<std::size_t>(bands), 0.0f);
-    count_.assign(n * static_cast<std::size_t>(bands), 0u);
-    radius_.assign(n, 0.0f);
+    zero_with_room(grad_, n * static_cast<std::size_t>(bands));
+    zero_with_room(count_, n * static_cast<std::size_t>(bands));
+    zero_with_room(radius_, n);
   }
   /// Zero every accumulator for `n` Gaussians, same bands.
   void reset(std::size_t n) { reset(n, bands_); }
@@ -789,6 +789,18 @@ class DensityStats {
  private:
   std::size_t n_ = 0;
   int bands_ = 1;
+  /// `v` as `size` zeros. Where it must grow, a quarter more is reserved: the model grows at
+  /// nearly every refinement of the growth phase, and a reallocation to the exact size each time
+  /// would take fresh pages (and their faults) at every one.
+  template <class T>
+  static void zero_with_room(std::vector<T>& v, std::size_t size) {
+    if (size > v.capacity()) {
+      std::vector<T>().swap(v);
+      v.reserve(size + size / 4);
+    }
+    v.assign(size, T(0));
+  }
+
   std::vector<float> grad_;            // [N, B] sum of NDC gradient norms over visible views
   std::vector<std::uint32_t> count_;   // [N, B] visible views
   std::vector<float> radius_;          // [N]    max screen radius / max(W, H)
@@ -1043,8 +1055,12 @@ class DensityControl {
     std::vector<S> sample_mean(samples * 3), sample_log_scale(samples * 3);
     const double dlog = std::log(cfg_.split_scale_divisor);
     const std::vector<std::uint64_t> draw_key = split_draw_keys(model, sel);
-    for (std::size_t j = 0; j < sel.size(); ++j)
+    // Every sample is drawn from its own key and written to its own row: in parallel, the same bits.
+    const std::ptrdiff_t nsel = static_cast<std::ptrdiff_t>(sel.size());
+#pragma omp parallel for schedule(static, 64)
+    for (std::ptrdiff_t jj = 0; jj < nsel; ++jj)
       for (int k = 0; k < cfg_.split_samples; ++k) {
+        const std::size_t j = static_cast<std::size_t>(jj);
         const std::size_t c = static_cast<std::size_t>(k) * sel.size() + j, parent = sel[j];
         double offset[3];
         sample_offset(model, parent, draw_key[j], step, k, offset);
@@ -1233,12 +1249,22 @@ class DensityControl {
       const std::size_t at = find(mean_of(r));
       if (table[at] == RefinePlan::none) table[at] = r;
     }
+    // Each row's slot, in parallel (the table is only read from here on); kNoSlot where its mean
+    // is no mover's, as for most rows, which the serial pass below then skips.
+    constexpr std::size_t kNoSlot = std::numeric_limits<std::size_t>::max();
+    std::vector<std::size_t> slot(m);
+    const std::ptrdiff_t sm = static_cast<std::ptrdiff_t>(m);
+#pragma omp parallel for schedule(static, 4096)
+    for (std::ptrdiff_t ff = 0; ff < sm; ++ff) {
+      const std::size_t at = find(mean_of(out[std::size_t(ff)]));
+      slot[std::size_t(ff)] = table[at] == RefinePlan::none ? kNoSlot : at;
+    }
     // Members of each slot's group, in ascending output rows (a linked list through `next`).
     std::vector<std::uint32_t> first(slots, RefinePlan::none), last(slots, RefinePlan::none), next(m, RefinePlan::none);
     std::vector<std::uint32_t> used;  // slots with two or more members
     for (std::size_t f = 0; f < m; ++f) {
-      const std::size_t at = find(mean_of(out[f]));
-      if (table[at] == RefinePlan::none) continue;
+      const std::size_t at = slot[f];
+      if (at == kNoSlot) continue;
       if (first[at] == RefinePlan::none) {
         first[at] = std::uint32_t(f);
       } else {
