@@ -14,6 +14,11 @@
 #include <msgs/detail/overwrite_vector.hpp>
 #include <msgs/large_page_new.hpp>
 
+#if defined(__linux__)
+#include <sys/mman.h>
+#include <unistd.h>
+#endif
+
 using msgs::detail::kLargePageBytes;
 
 namespace {
@@ -106,4 +111,50 @@ TEST_CASE("the replacement operator new: large arrays of the program in large pa
   CHECK(::operator new[](impossible, std::nothrow) == nullptr);
   CHECK_THROWS_AS((void)::operator new(impossible), std::bad_alloc);
 #endif
+}
+
+#if defined(__linux__)
+namespace {
+/// Pages of [p, p + bytes) that are resident, by mincore.
+std::size_t resident_pages(const void* p, std::size_t bytes) {
+  const std::uintptr_t page = std::uintptr_t(sysconf(_SC_PAGESIZE));
+  const std::uintptr_t lo = reinterpret_cast<std::uintptr_t>(p) & ~(page - 1);
+  const std::size_t len = reinterpret_cast<std::uintptr_t>(p) + bytes - lo;
+  std::vector<unsigned char> vec((len + page - 1) / page);
+  if (mincore(reinterpret_cast<void*>(lo), len, vec.data()) != 0) return 0;
+  std::size_t n = 0;
+  for (unsigned char c : vec) n += c & 1;
+  return n;
+}
+}  // namespace
+#endif
+
+TEST_CASE("populate_for_write faults a block in without changing a byte; a grown vector still reads zeros") {
+  const std::size_t bytes = (std::size_t(9) << 20) + 123;
+  auto* p = static_cast<unsigned char*>(msgs::detail::allocate_large_aware(bytes));
+  REQUIRE(p != nullptr);
+#if defined(__linux__) && defined(MADV_POPULATE_WRITE)
+  // A fresh block is not resident yet; where this kernel has MADV_POPULATE_WRITE (5.14 on),
+  // populating makes all of it resident.
+  const std::size_t page = std::size_t(sysconf(_SC_PAGESIZE));
+  void* probe = mmap(nullptr, page, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+  REQUIRE(probe != MAP_FAILED);
+  const bool supported = madvise(probe, page, MADV_POPULATE_WRITE) == 0;
+  munmap(probe, page);
+  msgs::detail::populate_for_write(p + 5, bytes - 5);  // an unaligned start
+  if (supported) CHECK(resident_pages(p, bytes) == (bytes + page - 1) / page);
+#endif
+  for (std::size_t i = 0; i < bytes; i += 997) p[i] = static_cast<unsigned char>(i * 7 + 1);
+  msgs::detail::populate_for_write(p, bytes);  // again, on written pages
+  std::size_t changed = 0;
+  for (std::size_t i = 0; i < bytes; i += 997) changed += p[i] != static_cast<unsigned char>(i * 7 + 1);
+  CHECK(changed == 0);
+  std::free(p);
+
+  std::vector<float> v(10, 3.0f);
+  msgs::detail::resize_for_overwrite(v, std::size_t(3) << 20);  // grows: old values dropped, new ones zero
+  REQUIRE(v.size() == std::size_t(3) << 20);
+  std::size_t nonzero = 0;
+  for (const float x : v) nonzero += x != 0.0f;
+  CHECK(nonzero == 0);
 }

@@ -56,12 +56,16 @@ using OverwriteVector = std::vector<T, NoFillAllocator<T>>;
 /// old values are dropped instead of copied and half as much again is reserved, so that the next
 /// calls, a little larger, do not reallocate again. An OverwriteVector is not filled either: its
 /// new pages are first touched by the pass that writes them (in parallel), not by a serial copy
-/// and fill here. (Any std::vector works; one with the standard allocator is zero-filled.)
+/// and fill here. (Any std::vector works; one with the standard allocator is zero-filled, after
+/// its new pages were faulted in by every thread.)
 template <class T, class A>
 void resize_for_overwrite(std::vector<T, A>& v, std::size_t n) {
   if (n > v.capacity()) {
     std::vector<T, A>().swap(v);
     v.reserve(n + n / 2);
+    // A vector that fills its new values fills them from this thread: fault their pages in from
+    // every thread first (populate_for_write), so that the kernel's zeroing of them is shared.
+    if constexpr (!std::is_same_v<A, NoFillAllocator<T>>) populate_for_write(v.data(), n * sizeof(T));
   }
   v.resize(n);
 }
