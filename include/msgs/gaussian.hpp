@@ -10,8 +10,6 @@
 #include <string>
 #include <vector>
 
-#include "msgs/detail/overwrite_vector.hpp"
-
 namespace msgs {
 
 /// Compile-time description of a Gaussian primitive with `Bands` colour channels and spherical
@@ -129,11 +127,18 @@ struct GaussianModel {
   /// (band planes shift; storage that grows starts over, with room for half as many again), there
   /// is no copy. For buffers that are rewritten anyway (gradients); `resize` keeps values.
   void reshape(std::size_t n) {
-    detail::resize_for_overwrite(means, n * 3);
-    detail::resize_for_overwrite(log_scales, n * 3);
-    detail::resize_for_overwrite(quats, n * 4);
-    detail::resize_for_overwrite(opacity_logits, n);
-    detail::resize_for_overwrite(sh, n * static_cast<std::size_t>(G::sh_floats));
+    const auto fit = [](std::vector<S>& v, std::size_t count) {  // as detail::resize_for_overwrite
+      if (count > v.capacity()) {
+        std::vector<S>().swap(v);
+        v.reserve(count + count / 2);
+      }
+      v.resize(count);
+    };
+    fit(means, n * 3);
+    fit(log_scales, n * 3);
+    fit(quats, n * 4);
+    fit(opacity_logits, n);
+    fit(sh, n * static_cast<std::size_t>(G::sh_floats));
   }
 
   /// Fill every array with zero (keeps the size); used for gradient buffers.
