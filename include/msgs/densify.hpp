@@ -789,16 +789,13 @@ class DensityStats {
  private:
   std::size_t n_ = 0;
   int bands_ = 1;
-  /// `v` as `size` zeros. Where it must grow, a quarter more is reserved: the model grows at
-  /// nearly every refinement of the growth phase, and a reallocation to the exact size each time
-  /// would take fresh pages (and their faults) at every one.
+  /// `v` as `size` zeros, grown as detail::resize_for_overwrite grows it (with room to spare): the
+  /// model grows at nearly every refinement of the growth phase, and a reallocation to the exact
+  /// size each time would take fresh pages (and their faults) at every one.
   template <class T>
   static void zero_with_room(std::vector<T>& v, std::size_t size) {
-    if (size > v.capacity()) {
-      std::vector<T>().swap(v);
-      v.reserve(size + size / 4);
-    }
-    v.assign(size, T(0));
+    detail::resize_for_overwrite(v, size);
+    std::fill(v.begin(), v.end(), T(0));
   }
 
   std::vector<float> grad_;            // [N, B] sum of NDC gradient norms over visible views
