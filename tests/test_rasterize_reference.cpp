@@ -7,6 +7,7 @@
 
 #include "reference_renderer.hpp"
 
+#include <bit>
 #include <cstdio>
 #include <cstring>
 #include <iterator>
@@ -424,4 +425,30 @@ TEST_CASE("BlockRange::blocks: the bit set of every block in the range, for ever
           }
   }
   CHECK(checked > 10000);
+}
+
+TEST_CASE("append_set_bits: the set bits of every 16-bit mask, ascending, with their tag, after what is there") {
+  // Both forms (the table one is the only one without AVX-512) against a loop over the bits, for
+  // every mask, appended behind a prefix that must survive and ahead of the 16 entries of room.
+  for (const bool by_table : {false, true}) {
+    for (std::uint32_t bits = 0; bits < 65536u; ++bits) {
+      std::uint8_t out[3 + 16 + 16], tags[3 + 16 + 16];
+      std::memset(out, 0xee, sizeof out);
+      std::memset(tags, 0xee, sizeof tags);
+      const std::uint8_t tag = std::uint8_t(bits % 13);
+      const int n = by_table ? detail::append_set_bits_by_table(bits, tag, out + 3, tags + 3)
+                             : detail::append_set_bits(bits, tag, out + 3, tags + 3);
+      int want = 0;
+      bool ok = n == std::popcount(bits);
+      for (int b = 0; b < 16; ++b)
+        if (bits >> b & 1u) {
+          ok = ok && out[3 + want] == b && tags[3 + want] == tag;
+          ++want;
+        }
+      for (int i = 0; i < 3; ++i) ok = ok && out[i] == 0xee && tags[i] == 0xee;  // before: untouched
+      for (int i = 3 + 16; i < int(sizeof out); ++i) ok = ok && out[i] == 0xee && tags[i] == 0xee;  // past the room
+      INFO("mask ", bits, by_table ? " (table)" : "");
+      REQUIRE(ok);
+    }
+  }
 }
