@@ -616,11 +616,7 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
   S colour[kBlendBatch][NC];
   std::uint32_t position[kBlendBatch];  // in the tile list
   std::uint64_t entry[kBlendBatch];
-  // The sums of each splat of the batch. Where a chunk is one vector (AVX-512) the current
-  // splat's sums live in registers: set to zero where a new splat begins (a select, not a
-  // branch) and stored after every chunk, so that its last chunk leaves them here. Otherwise each
-  // chunk adds into them here (the registers would not hold them all).
-  V sums_of[kBlendBatch][NL * NH];
+  int chunks_end[kBlendBatch];  // splat k's listed chunks end here (they follow those of k - 1)
   for (std::uint64_t top = begin + max_last; top > begin;) {
     const int nb = int(std::min<std::uint64_t>(kBlendBatch, top - begin));
     // The batch's entries that blended somewhere (block mask not 0), back to front: a splat the
@@ -653,8 +649,6 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
       const std::uint32_t g = list[jr];
       position[k] = std::uint32_t(jr - begin);
       for (int ch = 0; ch < NC; ++ch) colour[k][ch] = ch < nc ? in.colours[std::size_t(g) * std::size_t(nc) + std::size_t(ch)] : S(0);
-#pragma GCC unroll 64
-      for (int l = 0; l < NL * NH; ++l) sums_of[k][l] = zero;
       batch.add(k, in.splats[g], block_mask[jr]);
     }
     // Pass 2: the chunks to visit and their sigma, in block order per splat. As in the forward, a
@@ -672,81 +666,69 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
         if constexpr (NH > 1) batch.list(q, k, sig, detail::any_lane((sig <= sigma_cut) & __builtin_convertvector(kv < last[q], M)));
         else batch.list(q, k, sig, true);
       }
+      chunks_end[k] = batch.chunks;  // every splat here has a block, so every end is set
     }
     // Pass 3: the alpha of every listed chunk, as in the forward.
     batch.alphas(max_alpha);
-    // Pass 4: the gradient of each listed chunk. Each pixel's state (T, B) is touched once per
-    // splat and each sum takes its chunks in block order, whatever the vector width.
-    V in_registers[NH == 1 ? NL : 1];
-#pragma GCC unroll 64
-    for (int l = 0; l < (NH == 1 ? NL : 1); ++l) in_registers[l] = zero;
-    int k_prev = batch.chunks > 0 ? batch.chunk_splat[0] : 0;
-    for (int i = 0; i < batch.chunks; ++i) {
-      const int q = batch.chunk[i], k = batch.chunk_splat[i], b = q / NH, h = q % NH, bx = b % P, by = b / P;
-      V* lane = sums_of[k];  // [accumulator][chunk]
-      if constexpr (NH == 1) {
-        M fresh;
-        detail::broadcast(fresh, typename BV::MaskScalar(-int(k != k_prev)));
-#pragma GCC unroll 64
-        for (int l = 0; l < NL; ++l) in_registers[l] = fresh ? zero : in_registers[l];
-        k_prev = k;
-        lane = in_registers;
-      }
+    // Pass 4: the gradient of each listed chunk, splat by splat (one loop per splat: its sums
+    // stay in registers, and a large splat does not pay for the batch). Each pixel's state (T, B)
+    // is touched once per splat and each sum takes its chunks in block order, whatever the vector
+    // width.
+    for (int k = 0, i = 0; k < m; ++k) {
       const Splat<S>& s = batch.splat[k];
-      U kv;
+      const detail::SplatSigma<S>& sg = batch.sigma_of[k];
+      U kv;  // a pixel blended this splat iff kv < last
       detail::broadcast(kv, position[k]);
       V col[NC];
       for (int ch = 0; ch < NC; ++ch) detail::broadcast(col[ch], colour[k][ch]);
-      const V alpha = batch.alpha[i];
-      const M ok = __builtin_convertvector(kv < last[q], M) & (batch.sigma[i] >= zero) & (alpha >= min_alpha);
-      const V ra = one / (one - alpha);
-      const V Ti = ok ? T[q] * ra : T[q];
-      const V fac = alpha * Ti;
-      V cd = col[0] * dimg[0][q];  // colour . dL/dimage of this pixel
-      for (int ch = 1; ch < NC; ++ch) detail::fmadd_into(cd, col[ch], dimg[ch][q], cd);
-      if constexpr (Depth) {
-        V z;
-        detail::broadcast(z, s.z);
-        detail::fmadd_into(cd, z, dD[q], cd);
-      }
-      V v_alpha;
-      detail::fmadd_into(v_alpha, Ti, cd, ra * (t_final_terms[q] - B[q]));
-      detail::fmadd_where(B[q], ok, fac, cd);
-      for (int ch = 0; ch < NC; ++ch) detail::fmadd_where(lane[(kCol + ch) * NH + h], ok, fac, dimg[ch][q]);
-      if constexpr (Depth) detail::fmadd_where(lane[kDep * NH + h], ok, fac, dD[q]);
-      // alpha = min(0.99, o e^-sigma): no gradient through the clamp. u = -dL/dsigma = dL/dalpha
-      // o e^-sigma, and where the clamp does not hold (alpha < 0.99) o e^-sigma is alpha itself.
-      const M free = ok & (alpha < max_alpha);
-      const V u = free ? v_alpha * alpha : zero;
-      const V dx = batch.sigma_of[k].dx(centres, bx, h), dy = batch.sigma_of[k].dy(centres, by, h);
-      const V ux = u * dx, uy = u * dy;
-      lane[kU * NH + h] += u;
-      lane[kUx * NH + h] += ux;
-      lane[kUy * NH + h] += uy;
-      detail::fmadd_into(lane[kUxx * NH + h], ux, dx, lane[kUxx * NH + h]);
-      detail::fmadd_into(lane[kUxy * NH + h], ux, dy, lane[kUxy * NH + h]);
-      detail::fmadd_into(lane[kUyy * NH + h], uy, dy, lane[kUyy * NH + h]);
-      if constexpr (AbsGrad) {
-        // +-dL/dmean per pixel: -u (a dx + b dy, b dx + c dy)
-        V gx = u * (s.a * dx + s.b * dy), gy = u * (s.b * dx + s.c * dy);
-        detail::abs_into(gx, gx);
-        detail::abs_into(gy, gy);
-        lane[kAbsX * NH + h] += gx;
-        lane[kAbsY * NH + h] += gy;
-      }
-      T[q] = Ti;
-      if constexpr (NH == 1) {
+      [[maybe_unused]] V z;
+      detail::broadcast(z, s.z);
+      V lane[NL * NH];  // [accumulator][chunk]
+      // Unrolled, so that GCC does not turn it into a call to memset per splat (with AVX2 that
+      // call and its vzeroupper took 5% of a training step).
 #pragma GCC unroll 64
-        for (int l = 0; l < NL; ++l) sums_of[k][l] = in_registers[l];
+      for (int l = 0; l < NL * NH; ++l) lane[l] = zero;
+      for (; i < chunks_end[k]; ++i) {
+        const int q = batch.chunk[i], b = q / NH, h = q % NH, bx = b % P, by = b / P;
+        const V alpha = batch.alpha[i];
+        const M ok = __builtin_convertvector(kv < last[q], M) & (batch.sigma[i] >= zero) & (alpha >= min_alpha);
+        const V ra = one / (one - alpha);
+        const V Ti = ok ? T[q] * ra : T[q];
+        const V fac = alpha * Ti;
+        V cd = col[0] * dimg[0][q];  // colour . dL/dimage of this pixel
+        for (int ch = 1; ch < NC; ++ch) detail::fmadd_into(cd, col[ch], dimg[ch][q], cd);
+        if constexpr (Depth) detail::fmadd_into(cd, z, dD[q], cd);
+        V v_alpha;
+        detail::fmadd_into(v_alpha, Ti, cd, ra * (t_final_terms[q] - B[q]));
+        detail::fmadd_where(B[q], ok, fac, cd);
+        for (int ch = 0; ch < NC; ++ch) detail::fmadd_where(lane[(kCol + ch) * NH + h], ok, fac, dimg[ch][q]);
+        if constexpr (Depth) detail::fmadd_where(lane[kDep * NH + h], ok, fac, dD[q]);
+        // alpha = min(0.99, o e^-sigma): no gradient through the clamp. u = -dL/dsigma = dL/dalpha
+        // o e^-sigma, and where the clamp does not hold (alpha < 0.99) o e^-sigma is alpha itself.
+        const M free = ok & (alpha < max_alpha);
+        const V u = free ? v_alpha * alpha : zero;
+        const V dx = sg.dx(centres, bx, h), dy = sg.dy(centres, by, h);
+        const V ux = u * dx, uy = u * dy;
+        lane[kU * NH + h] += u;
+        lane[kUx * NH + h] += ux;
+        lane[kUy * NH + h] += uy;
+        detail::fmadd_into(lane[kUxx * NH + h], ux, dx, lane[kUxx * NH + h]);
+        detail::fmadd_into(lane[kUxy * NH + h], ux, dy, lane[kUxy * NH + h]);
+        detail::fmadd_into(lane[kUyy * NH + h], uy, dy, lane[kUyy * NH + h]);
+        if constexpr (AbsGrad) {
+          // +-dL/dmean per pixel: -u (a dx + b dy, b dx + c dy)
+          V gx = u * (s.a * dx + s.b * dy), gy = u * (s.b * dx + s.c * dy);
+          detail::abs_into(gx, gx);
+          detail::abs_into(gy, gy);
+          lane[kAbsX * NH + h] += gx;
+          lane[kAbsY * NH + h] += gy;
+        }
+        T[q] = Ti;
       }
-    }
-    // The records of the batch's splats.
-    for (int k = 0; k < m; ++k) {
-      const Splat<S>& s = batch.splat[k];
-      S* rec = records + pair_index[entry[k]] * std::uint64_t(R);
       S sum[NL];
-      detail::sum_rows(sums_of[k], NL, sum);
+      detail::sum_rows(lane, NL, sum);
       // dL/dsigma = -u: dL/dmean = -(conic (sum v dx, sum v dy)) with v = dL/dsigma, and so on.
+      S* rec = records + pair_index[entry[k]] * std::uint64_t(R);
       rec[Rec::kMeanX] = s.a * sum[kUx] + s.b * sum[kUy];
       rec[Rec::kMeanY] = s.b * sum[kUx] + s.c * sum[kUy];
       rec[Rec::kConicA] = S(-0.5) * sum[kUxx];
