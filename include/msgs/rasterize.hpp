@@ -269,11 +269,19 @@ class Rasterizer {
       }
       if (colour) colour->prefetch(ids, n, first, count);
       double acc[L][Rec::size(kBands)] = {};  // lanes past n stay zero
-      for (int l = 0; l < n; ++l) {
-        const std::size_t v = std::size_t(v0 + l);
-        const S* rec = records_.data() + bins_.pair_offset[v] * std::uint64_t(R);  // in pair order
-        for (std::uint64_t m = bins_.pair_offset[v]; m < bins_.pair_offset[v + 1]; ++m, rec += R)
+      {
+        // The batch's pairs are consecutive (pair order is visible-id order): one loop over all of
+        // them, moving to the next lane where the next Gaussian's pairs begin. Every visible
+        // Gaussian has a pair (a non-empty rectangle covers a tile), so a lane moves at most one
+        // step per pair. A loop per Gaussian over its 1 to 4 pairs ended in a mispredicted
+        // branch nearly every time (7% of this reduction and projection backward).
+        const std::uint64_t* off = bins_.pair_offset.data() + v0;
+        const S* rec = records_.data() + off[0] * std::uint64_t(R);
+        int l = 0;
+        for (std::uint64_t m = off[0], m_end = off[n]; m < m_end; ++m, rec += R) {
+          l += int(m == off[l + 1]);
           for (int k = 0; k < R; ++k) acc[l][k] += double(rec[k]);
+        }
       }
       const std::uint32_t hard = backward_batch<D>(model, ids, n, acc, grads, colour);
       if constexpr (Opt.single_precision)
