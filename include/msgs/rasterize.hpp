@@ -461,6 +461,7 @@ class Rasterizer {
       const int n = int(std::min<std::int64_t>(L, N - i0));
       std::uint32_t ids[L];
       for (int l = 0; l < L; ++l) ids[l] = std::uint32_t(i0 + (l < n ? l : 0));  // padding repeats the first
+      if (const std::int64_t ip = i0 + kProjectPrefetchBatches * L; ip + L <= N) prefetch_colour_rows(model, std::size_t(ip));
       const std::uint32_t hard = project_batch<D>(model, ids, n);
       if constexpr (Opt.single_precision)
         for (int l = 0; l < n; ++l)
@@ -484,6 +485,23 @@ class Rasterizer {
       std::uint32_t* out = visible_.data() + visible_offset_[std::size_t(k)];
       for (std::size_t i = chunk_begin(k), e = chunk_begin(k + 1); i < e; ++i)
         if (visible_flag_[i]) *out++ = std::uint32_t(i);
+    }
+  }
+
+  /// How many batches ahead project_all fetches the colour rows it will read. The hardware's
+  /// prefetch does not keep up with them: on the demo's views the projection waited on its colour
+  /// rows for about a third of its time, and fetching them 4 batches ahead made it about 1.17x
+  /// faster (2 to 16 gave about the same). Fetching the geometry rows too made it slower again.
+  static constexpr std::int64_t kProjectPrefetchBatches = 4;
+
+  /// Fetches into the cache the rendered channels' colour rows of the L consecutive Gaussians from
+  /// `first_row` (one batch of the projection).
+  template <int L = detail::Lanes<ProjLanes>::kCount>
+  void prefetch_colour_rows(const Model& model, std::size_t first_row) const {
+    constexpr std::size_t kBytes = std::size_t(L) * G::sh_coeffs * sizeof(S);
+    for (int ch = first_; ch < first_ + count_; ++ch) {
+      const char* row = reinterpret_cast<const char*>(model.sh_row(first_row, ch));
+      for (std::size_t b = 0; b < kBytes; b += 64) __builtin_prefetch(row + b);
     }
   }
 
