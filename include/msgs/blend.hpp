@@ -62,13 +62,13 @@ inline void prefetch_object(const T* p) {
   __builtin_prefetch(b + sizeof(T) - 1);
 }
 
-/// Prefetches for writing the cache lines of the n elements at p.
-template <class T>
-inline void prefetch_for_write(T* p, std::size_t n) {
+/// Prefetches the cache lines of the n elements at p, for writing with `Write`.
+template <bool Write, class T>
+inline void prefetch_elements(const T* p, std::size_t n) {
   const char* b = reinterpret_cast<const char*>(p);
   const char* e = reinterpret_cast<const char*>(p + n);
-  for (const char* c = b; c < e; c += 64) __builtin_prefetch(c, 1);
-  if (n > 0) __builtin_prefetch(e - 1, 1);
+  for (const char* c = b; c < e; c += 64) __builtin_prefetch(c, Write ? 1 : 0);
+  if (n > 0) __builtin_prefetch(e - 1, Write ? 1 : 0);
 }
 
 /// A 16x16 tile is processed as 4x4 blocks of 4x4 pixels, one block being 16 lanes (one
@@ -248,12 +248,13 @@ inline int append_set_bits(std::uint32_t bits, std::uint8_t tag, std::uint8_t* o
 /// and taken one at a time, the data-dependent ends of their short loops were mispredicted so
 /// often that they bounded the blend (batches made the forward 1.46x faster on the demo's views).
 /// Within a chunk the splats still come in list order, so every value keeps its bits.
-template <class S>
+template <class S, int NC>
 struct BlendBatch {
   using V = typename BlockVec<S>::V;
   static constexpr int kChunksPerTile = TileBlocks::kCount * BlockVec<S>::kChunks;
   Splat<S> splat[kBlendBatch];
   SplatSigma<S> sigma_of[kBlendBatch];
+  S colour[kBlendBatch][NC];  // the rendered channels, zeros past them
   // Pass 1: (block, splat) items; 16 entries of room for append_set_bits.
   std::uint8_t block[kBlendBatch * TileBlocks::kCount + 16], block_splat[kBlendBatch * TileBlocks::kCount + 16];
   int blocks = 0;
@@ -263,10 +264,12 @@ struct BlendBatch {
   std::uint8_t chunk[kBlendBatch * kChunksPerTile], chunk_splat[kBlendBatch * kChunksPerTile];
   int chunks = 0;
 
-  /// Splat k of the batch is `s`, its blocks to visit `block_bits` (TileBlocks order).
-  void add(int k, const Splat<S>& s, std::uint32_t block_bits) {
+  /// Splat k of the batch is `s` with the `nc` channels of `colour_row`, its blocks to visit
+  /// `block_bits` (TileBlocks order).
+  void add(int k, const Splat<S>& s, const S* colour_row, int nc, std::uint32_t block_bits) {
     splat[k] = s;
     sigma_of[k] = SplatSigma<S>(s);
+    for (int ch = 0; ch < NC; ++ch) colour[k][ch] = ch < nc ? colour_row[ch] : S(0);
     blocks += append_set_bits(block_bits, std::uint8_t(k), block + blocks, block_splat + blocks);
   }
   /// Lists chunk q of splat k with its sigma where `keep`; a chunk left out changes nothing.
@@ -349,6 +352,13 @@ struct TileBounds {
   }
 };
 
+/// Prefetches what a blend loop reads of splat g: its Splat and its colour row.
+template <class S>
+inline void prefetch_splat(const BlendInputs<S>& in, std::uint32_t g) {
+  prefetch_object(in.splats + g);
+  __builtin_prefetch(in.colours + std::size_t(g) * std::size_t(in.count));
+}
+
 }  // namespace detail
 
 /// Blend one tile front to back. `C` is the channel count when known at compile time (0 = use
@@ -397,11 +407,11 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
     const int W = in.grid->width;
     for (int y = 0; y < tb.h; ++y) {
       const std::size_t pix = std::size_t(tb.y0 + y) * std::size_t(W) + std::size_t(tb.x0);
-      detail::prefetch_for_write(out.image + pix * std::size_t(nc), std::size_t(tb.w) * std::size_t(nc));
-      detail::prefetch_for_write(out.alpha + pix, std::size_t(tb.w));
-      detail::prefetch_for_write(out.transmittance + pix, std::size_t(tb.w));
-      detail::prefetch_for_write(out.last + pix, std::size_t(tb.w));
-      if constexpr (Depth) detail::prefetch_for_write(out.depth + pix, std::size_t(tb.w));
+      detail::prefetch_elements<true>(out.image + pix * std::size_t(nc), std::size_t(tb.w) * std::size_t(nc));
+      detail::prefetch_elements<true>(out.alpha + pix, std::size_t(tb.w));
+      detail::prefetch_elements<true>(out.transmittance + pix, std::size_t(tb.w));
+      detail::prefetch_elements<true>(out.last + pix, std::size_t(tb.w));
+      if constexpr (Depth) detail::prefetch_elements<true>(out.depth + pix, std::size_t(tb.w));
     }
   }
   const detail::TileCentres<S> centres(lx, ly, tb.x0, tb.y0);
@@ -414,8 +424,7 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
   const std::uint64_t begin = in.bins->tile_offset[std::size_t(tile)], end = in.bins->tile_offset[std::size_t(tile) + 1];
   const std::uint32_t* list = in.bins->tile_list.data();
   std::uint64_t j = begin, fragments = 0;
-  detail::BlendBatch<S> batch;
-  S colour[kBlendBatch][NC];
+  detail::BlendBatch<S, NC> batch;
   for (; j < end; j += kBlendBatch) {
     if (j != begin) {
       for (std::uint32_t bits = live; bits != 0; bits &= bits - 1) {
@@ -427,18 +436,14 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
       if (live == 0) break;
     }
     const int nb = int(std::min<std::uint64_t>(kBlendBatch, end - j));
-    for (std::uint64_t p = j + kBlendBatch, pe = std::min<std::uint64_t>(p + kBlendBatch, end); p < pe; ++p) {
-      const std::uint32_t gp = list[p];
-      detail::prefetch_object(in.splats + gp);
-      __builtin_prefetch(in.colours + std::size_t(gp) * std::size_t(nc));
-    }
+    for (std::uint64_t p = j + kBlendBatch, pe = std::min<std::uint64_t>(p + kBlendBatch, end); p < pe; ++p)
+      detail::prefetch_splat(in, list[p]);
     // Pass 1: the splats, and the blocks of each one's rectangle that may still be live.
     batch.blocks = batch.chunks = 0;
     for (int k = 0; k < nb; ++k) {
       const std::uint32_t g = list[j + std::uint64_t(k)];
       const Splat<S>& s = in.splats[g];
-      for (int ch = 0; ch < NC; ++ch) colour[k][ch] = ch < nc ? in.colours[std::size_t(g) * std::size_t(nc) + std::size_t(ch)] : S(0);
-      batch.add(k, s, detail::BlockRange(s.rect, tb).blocks() & live);
+      batch.add(k, s, in.colours + std::size_t(g) * std::size_t(nc), nc, detail::BlockRange(s.rect, tb).blocks() & live);
     }
     // Pass 2: the chunks to visit and their sigma. A chunk with no lane inside the splat's cut
     // whose pixel is still live (T > 0 at the start of the batch; this also leaves out every chunk
@@ -470,7 +475,7 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
       const V weight = take ? alpha * t : zero;
       for (int ch = 0; ch < NC; ++ch) {
         V col;
-        detail::broadcast(col, colour[k][ch]);
+        detail::broadcast(col, batch.colour[k][ch]);
         detail::fmadd_into(acc[ch][q], weight, col, acc[ch][q]);
       }
       if constexpr (Depth) {
@@ -612,8 +617,7 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
   const std::uint32_t* list = in.bins->tile_list.data();
   const std::uint64_t* pair_index = in.bins->pair_index.data();
   // The list is taken kBlendBatch entries at a time, back to front (detail::BlendBatch).
-  detail::BlendBatch<S> batch;
-  S colour[kBlendBatch][NC];
+  detail::BlendBatch<S, NC> batch;
   std::uint32_t position[kBlendBatch];  // in the tile list
   std::uint64_t entry[kBlendBatch];
   int chunks_end[kBlendBatch];  // splat k's listed chunks end here (they follow those of k - 1)
@@ -630,9 +634,7 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
       m += int(block_mask[jr] != 0);
       if (jr >= begin + kBlendBatch) {  // the next batch's splat and the record it will write
         const std::uint64_t jn = jr - kBlendBatch;
-        const std::uint32_t gp = list[jn];
-        detail::prefetch_object(in.splats + gp);
-        __builtin_prefetch(in.colours + std::size_t(gp) * std::size_t(nc));
+        detail::prefetch_splat(in, list[jn]);
         if (block_mask[jn] != 0) {  // records scatter: fetched for writing
           const S* rp = records + pair_index[jn] * std::uint64_t(R);
           __builtin_prefetch(rp, 1);
@@ -648,8 +650,7 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
       const std::uint64_t jr = entry[k];
       const std::uint32_t g = list[jr];
       position[k] = std::uint32_t(jr - begin);
-      for (int ch = 0; ch < NC; ++ch) colour[k][ch] = ch < nc ? in.colours[std::size_t(g) * std::size_t(nc) + std::size_t(ch)] : S(0);
-      batch.add(k, in.splats[g], block_mask[jr]);
+      batch.add(k, in.splats[g], in.colours + std::size_t(g) * std::size_t(nc), nc, block_mask[jr]);
     }
     // Pass 2: the chunks to visit and their sigma, in block order per splat. As in the forward, a
     // chunk without a lane inside the cut and in front of its pixel's last blended splat adds
@@ -680,7 +681,7 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
       U kv;  // a pixel blended this splat iff kv < last
       detail::broadcast(kv, position[k]);
       V col[NC];
-      for (int ch = 0; ch < NC; ++ch) detail::broadcast(col[ch], colour[k][ch]);
+      for (int ch = 0; ch < NC; ++ch) detail::broadcast(col[ch], batch.colour[k][ch]);
       [[maybe_unused]] V z;
       detail::broadcast(z, s.z);
       V lane[NL * NH];  // [accumulator][chunk]

@@ -496,13 +496,10 @@ class Rasterizer {
 
   /// Fetches into the cache the rendered channels' colour rows of the L consecutive Gaussians from
   /// `first_row` (one batch of the projection).
-  template <int L = detail::Lanes<ProjLanes>::kCount>
   void prefetch_colour_rows(const Model& model, std::size_t first_row) const {
-    constexpr std::size_t kBytes = std::size_t(L) * G::sh_coeffs * sizeof(S);
-    for (int ch = first_; ch < first_ + count_; ++ch) {
-      const char* row = reinterpret_cast<const char*>(model.sh_row(first_row, ch));
-      for (std::size_t b = 0; b < kBytes; b += 64) __builtin_prefetch(row + b);
-    }
+    constexpr int L = detail::Lanes<ProjLanes>::kCount;
+    for (int ch = first_; ch < first_ + count_; ++ch)
+      detail::prefetch_elements<false>(model.sh_row(first_row, ch), std::size_t(L) * G::sh_coeffs);
   }
 
   /// Project and shade the Gaussians ids[0 .. n) (lanes past n repeat ids[0]) and write their
