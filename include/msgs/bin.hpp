@@ -103,7 +103,7 @@ struct Binning {
     std::vector<TileRect> rects;             // [V] tile rectangles in depth order
     std::vector<std::uint64_t> first_pair;   // [V] each one's first pair (pair_offset) in depth order
     std::vector<std::uint64_t> chunk_sums;   // [chunks + 1] pair counts of the prefix sum's chunks
-    std::vector<std::uint64_t> hist;         // [chunks, tiles] or [chunks, radix buckets]
+    std::vector<std::uint64_t> hist;         // [chunks, tiles] or [chunks, radix buckets], rows on cache lines
   } scratch;
 };
 
@@ -125,6 +125,21 @@ inline DepthKey<S> depth_key(S z) {
 /// Number of fixed chunks a pass over `n` items is split into: independent of the thread count,
 /// so that every result (and its bits) is too.
 inline int fixed_chunks(std::size_t n) { return int(std::clamp<std::size_t>(n / 4096, 1, 64)); }
+
+/// The number of T, at least n, that fill whole 64-byte cache lines.
+template <class T>
+constexpr std::size_t round_up_to_line(std::size_t n) {
+  constexpr std::size_t per_line = 64 / sizeof(T);
+  return (n + per_line - 1) / per_line * per_line;
+}
+
+/// The first element of `v` that starts a 64-byte cache line (`v` needs 64 / sizeof(T) - 1
+/// elements of room for it).
+template <class T>
+T* first_on_line(std::vector<T>& v) {
+  const std::uintptr_t p = reinterpret_cast<std::uintptr_t>(v.data());
+  return v.data() + ((64 - p % 64) % 64) / sizeof(T);
+}
 
 /// Widest digit of radix_sort, in bits.
 inline constexpr int kRadixMaxDigit = 11;
@@ -170,7 +185,9 @@ inline void radix_sort(std::vector<KeyedId<Key>>& items, std::vector<KeyedId<Key
   const std::size_t B = std::size_t(1) << digit;
   const Key mask = Key(B - 1);
   scratch.resize(n);
-  hist.resize(std::size_t(chunks) * B);  // [chunks, B]
+  const std::size_t row = round_up_to_line<std::uint64_t>(B);  // a chunk's counters start a cache line
+  hist.resize(std::size_t(chunks) * row + row);                // [chunks, row >= B]
+  std::uint64_t* const hist0 = first_on_line(hist);
   int scattered = 0;  // passes that scattered: the result is in `scratch` when odd
   bool skip = false;  // the current pass would be the identity
 #pragma omp parallel
@@ -181,7 +198,7 @@ inline void radix_sort(std::vector<KeyedId<Key>>& items, std::vector<KeyedId<Key
       const unsigned shift = unsigned(p * digit);
 #pragma omp for schedule(static)
       for (int k = 0; k < chunks; ++k) {
-        std::uint64_t* h = hist.data() + std::size_t(k) * B;
+        std::uint64_t* h = hist0 + std::size_t(k) * row;
         std::fill_n(h, B, std::uint64_t(0));
         const std::size_t e = chunk_begin(k + 1);  // (hoisted: the stores below could alias it for the compiler)
         if (p == 0)
@@ -204,7 +221,7 @@ inline void radix_sort(std::vector<KeyedId<Key>>& items, std::vector<KeyedId<Key
         for (std::size_t b = 0; b < B; ++b) {
           const std::uint64_t start = sum;
           for (int k = 0; k < chunks; ++k) {
-            std::uint64_t& h = hist[std::size_t(k) * B + b];
+            std::uint64_t& h = hist0[std::size_t(k) * row + b];
             const std::uint64_t c = h;
             h = sum;
             sum += c;
@@ -216,7 +233,7 @@ inline void radix_sort(std::vector<KeyedId<Key>>& items, std::vector<KeyedId<Key
       if (skip) continue;  // every thread read the same flag: the single's barrier came before
 #pragma omp for schedule(static)
       for (int k = 0; k < chunks; ++k) {
-        std::uint64_t* cursor = hist.data() + std::size_t(k) * B;
+        std::uint64_t* cursor = hist0 + std::size_t(k) * row;
         const std::size_t e = chunk_begin(k + 1);
         for (std::size_t i = chunk_begin(k); i < e; ++i) dst[cursor[(src[i].key >> shift) & mask]++] = src[i];
       }
@@ -357,13 +374,18 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
   //    Most splats cover one tile or a 2x2 block of them: those are counted without a branch on
   //    their shape (the loops over a rectangle of 1 to 4 tiles were mispredicted about once per
   //    Gaussian, half the time of the count); larger ones in loops.
+  //    Each chunk's row of counters starts on a cache line of its own: at low resolution (a
+  //    dozen tiles) the rows of neighbouring chunks, counted by different threads, shared lines,
+  //    and two threads counted slower than one.
   const int chunks = detail::fixed_chunks(V);
   const std::size_t tx = std::size_t(grid.tiles_x);
-  sc.hist.assign(std::size_t(chunks) * std::size_t(tiles), 0);  // [chunks, tiles]
+  const std::size_t row = detail::round_up_to_line<std::uint64_t>(std::size_t(tiles));
+  sc.hist.assign(std::size_t(chunks) * row + row, 0);  // [chunks, row >= tiles] from a line start
+  std::uint64_t* const hist = detail::first_on_line(sc.hist);
   auto chunk_begin = [&](int k) { return V * std::size_t(k) / std::size_t(chunks); };
 #pragma omp parallel for schedule(dynamic, 1)
   for (int k = 0; k < chunks; ++k) {
-    std::uint64_t* h = sc.hist.data() + std::size_t(k) * std::size_t(tiles);
+    std::uint64_t* h = hist + std::size_t(k) * row;
     const std::size_t e = chunk_begin(k + 1);
     for (std::size_t s = chunk_begin(k); s < e; ++s) {
       const Binning::Scratch::TileRect& r = sc.rects[s];
@@ -385,7 +407,7 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
   for (int t = 0; t < tiles; ++t) {
     std::uint64_t sum = out.tile_offset[std::size_t(t)];
     for (int k = 0; k < chunks; ++k) {
-      std::uint64_t& h = sc.hist[std::size_t(k) * std::size_t(tiles) + std::size_t(t)];
+      std::uint64_t& h = hist[std::size_t(k) * row + std::size_t(t)];
       const std::uint64_t c = h;
       h = sum;  // becomes this chunk's write cursor for tile t
       sum += c;
@@ -396,7 +418,7 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
   detail::resize_for_overwrite(out.pair_index, M);
 #pragma omp parallel for schedule(dynamic, 1)
   for (int k = 0; k < chunks; ++k) {
-    std::uint64_t* cursor = sc.hist.data() + std::size_t(k) * std::size_t(tiles);
+    std::uint64_t* cursor = hist + std::size_t(k) * row;
     const std::size_t e = chunk_begin(k + 1);
     for (std::size_t s = chunk_begin(k); s < e; ++s) {
       const std::uint32_t g = out.order[s];
