@@ -74,10 +74,24 @@ struct Fingerprint {
   }
 };
 
+/// The loss training uses (L1 + 0.2 D-SSIM over the valid windows).
+const PhotometricLossConfig kTrainingLoss = TrainOptions{}.loss;
+
 /// Seconds per stage, summed over views.
 struct Stages {
   double project = 0, bin = 0, blend = 0, loss = 0, blend_backward = 0, gaussians_backward = 0;
   std::uint64_t fragments = 0, visible = 0;
+  Stages& operator+=(const Stages& o) {
+    project += o.project;
+    bin += o.bin;
+    blend += o.blend;
+    loss += o.loss;
+    blend_backward += o.blend_backward;
+    gaussians_backward += o.gaussians_backward;
+    fragments += o.fragments;
+    visible += o.visible;
+    return *this;
+  }
 };
 
 /// What one training image needs: its target, camera, and which channels of which model it renders.
@@ -102,7 +116,7 @@ struct ModelBench {
     raster.timings().reset();
     const Image<float>& img = raster.forward(*model, v.cam, rs);
     const auto t0 = std::chrono::steady_clock::now();
-    photometric_loss(img, v.target, &d_image, ws, PhotometricLossConfig{.ssim_weight = 0.2, .ssim_border = SsimBorder::valid});
+    photometric_loss(img, v.target, &d_image, ws, kTrainingLoss);
     t.loss += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     raster.backward(d_image, nullptr, nullptr, grads, GradientFill::visible);
     const RasterTimings& rt = raster.timings();
@@ -235,17 +249,7 @@ void bm_render_views(benchmark::State& st, int factor, int threads) {
   Fingerprint fp;
   scene->pass(factor, &fp);  // untimed: fills the buffers and fingerprints the results
   Stages sum;
-  for (auto _ : st) {
-    const Stages t = scene->pass(factor, nullptr);
-    sum.project += t.project;
-    sum.bin += t.bin;
-    sum.blend += t.blend;
-    sum.loss += t.loss;
-    sum.blend_backward += t.blend_backward;
-    sum.gaussians_backward += t.gaussians_backward;
-    sum.fragments += t.fragments;
-    sum.visible += t.visible;
-  }
+  for (auto _ : st) sum += scene->pass(factor, nullptr);
   const double passes = double(std::max<benchmark::IterationCount>(st.iterations(), 1));
   auto& k = st.counters;
   k["views/s"] = benchmark::Counter(double(n_views), benchmark::Counter::kIsIterationInvariantRate);

@@ -261,9 +261,7 @@ class Rasterizer {
       for (int l = 0; l < n; ++l) {
         const std::size_t g = ids[l];
         for (int ch = first; ch < first + count; ++ch) {
-          const S* row = model.sh_row(g, ch);
-          __builtin_prefetch(row);
-          __builtin_prefetch(row + G::sh_coeffs - 1);
+          detail::prefetch_elements<false>(model.sh_row(g, ch), G::sh_coeffs);
           if (!colour) detail::prefetch_elements<true>(grads.model.sh_row(g, ch), G::sh_coeffs);
         }
         __builtin_prefetch(&model.means[3 * g]);
