@@ -9,7 +9,8 @@
 // One iteration is one pass over all training images. Counters, in seconds per pass:
 // project_s, bin_s, blend_s, loss_s, blend_backward_s, gaussians_backward_s; and views/s,
 // fragments/s (blended fragments of the forward per second of the whole pass), fragments_per_view,
-// visible_per_view. The label is a hash of every rendered image, alpha image and gradient row of
+// visible_per_view, lane_use (the share of the blend's evaluated lanes that blended,
+// Rasterizer::blend_lanes). The label is a hash of every rendered image, alpha image and gradient row of
 // the seen Gaussians in one untimed pass before the timed ones: two builds that give the same
 // label computed the same bits on this scene.
 //
@@ -80,7 +81,7 @@ const PhotometricLossConfig kTrainingLoss = TrainOptions{}.loss;
 /// Seconds per stage, summed over views.
 struct Stages {
   double project = 0, bin = 0, blend = 0, loss = 0, blend_backward = 0, gaussians_backward = 0;
-  std::uint64_t fragments = 0, visible = 0;
+  std::uint64_t fragments = 0, lanes = 0, visible = 0;
   Stages& operator+=(const Stages& o) {
     project += o.project;
     bin += o.bin;
@@ -89,6 +90,7 @@ struct Stages {
     blend_backward += o.blend_backward;
     gaussians_backward += o.gaussians_backward;
     fragments += o.fragments;
+    lanes += o.lanes;
     visible += o.visible;
     return *this;
   }
@@ -126,6 +128,7 @@ struct ModelBench {
     t.blend_backward += rt.blend_backward;
     t.gaussians_backward += rt.project_backward;
     t.fragments += raster.fragments();
+    t.lanes += raster.blend_lanes();
     t.visible += raster.visible_count();
     if (!fp) return;
     fp->add(img.data.data(), img.data.size() * sizeof(float));
@@ -256,6 +259,7 @@ void bm_render_views(benchmark::State& st, int factor, int threads) {
   k["fragments/s"] = benchmark::Counter(double(sum.fragments) / passes, benchmark::Counter::kIsIterationInvariantRate);
   k["fragments_per_view"] = double(sum.fragments) / passes / double(n_views);
   k["visible_per_view"] = double(sum.visible) / passes / double(n_views);
+  k["lane_use"] = sum.lanes > 0 ? double(sum.fragments) / double(sum.lanes) : 0.0;
   k["project_s"] = sum.project / passes;
   k["bin_s"] = sum.bin / passes;
   k["blend_s"] = sum.blend / passes;

@@ -18,8 +18,9 @@
 // touches only those). forward_ms, loss_ms, backward_ms (with the regulariser), adam_ms and
 // stats_ms split the step into its stages (milliseconds per step); project_ms, bin_ms and blend_ms
 // split the forward, blend_backward_ms and gaussians_backward_ms the backward. fragments (blended
-// pixel-Gaussian pairs), intersections (Gaussian-tile pairs) and blend_ns_per_fragment (blend
-// forward + backward per fragment) measure the per-pixel work, which the bound does not count.
+// pixel-Gaussian pairs), intersections (Gaussian-tile pairs), blend_ns_per_fragment (blend
+// forward + backward per fragment) and lane_use (the share of the blend's evaluated lanes that
+// blended) measure the per-pixel work, which the bound does not count.
 // Except in the dense_zeroed cases, the colour update of the visible Gaussians runs inside the backward (as in
 // training, TrainOptions::fused_colour) and counts in gaussians_backward_ms, not in adam_ms.
 //
@@ -313,11 +314,14 @@ void bm_train_step(benchmark::State& st, int size, Variant v, int threads, int f
   k["blend_backward_ms"] = rt.blend_backward * per_step_ms;
   k["gaussians_backward_ms"] = rt.project_backward * per_step_ms;
   // The per-pixel work the bound leaves out: blended pixel-Gaussian pairs and Gaussian-tile pairs
-  // of the last step, and the blend's forward and backward time per fragment.
+  // of the last step, the blend's forward and backward time per fragment, and the share of the
+  // lanes it evaluated that blended.
   const double fragments = double(b.raster.fragments());
   k["fragments"] = fragments;
   k["intersections"] = double(b.raster.intersections());
   k["blend_ns_per_fragment"] = fragments > 0 ? (rt.blend + rt.blend_backward) * per_step_ms * 1e6 / fragments : 0.0;
+  const double lanes = double(b.raster.blend_lanes());
+  k["lane_use"] = lanes > 0 ? fragments / lanes : 0.0;
 }
 
 void tune(benchmark::internal::Benchmark* b, int size) {

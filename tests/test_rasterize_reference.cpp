@@ -85,6 +85,9 @@ void check_scene(const Camera<float>& cam, const SceneParams& sp, std::uint64_t 
     if (ref.splats[i].culled && (fast.radii()[2 * i] != 0 || fast.radii()[2 * i + 1] != 0)) ++culled_with_radius;
   CHECK(culled_with_radius == 0);
   CHECK(fast.fragments() == ref.fragments);
+  // The blend evaluates whole vectors of lanes, and every blended fragment is one of them.
+  CHECK(fast.blend_lanes() >= fast.fragments());
+  CHECK(fast.blend_lanes() % std::uint64_t(detail::BlockVec<float>::kLanes) == 0);
 }
 
 constexpr RasterOptions kDepth{.depth = true, .antialiased = false};

@@ -361,12 +361,19 @@ inline void prefetch_splat(const BlendInputs<S>& in, std::uint32_t g) {
 
 }  // namespace detail
 
+/// What blend_tile_fwd did in a tile: the fragments it blended and the lanes it evaluated (a
+/// vector of lanes per listed chunk). fragments / lanes is the share of the blend's vector work
+/// that blends; the rest falls outside a splat's alpha >= 1/255 region or on stopped pixels.
+struct BlendTileCount {
+  std::uint64_t fragments = 0, lanes = 0;
+};
+
 /// Blend one tile front to back. `C` is the channel count when known at compile time (0 = use
-/// in.count, at most MaxC). Returns the number of blended fragments. Pixel state lives in block
-/// vectors (detail::TileBlocks: 16 blocks of 4x4 pixels, detail::BlockVec: kChunks vectors per
-/// block); a splat visits only the blocks its pixel rectangle touches.
+/// in.count, at most MaxC). Returns the blended fragments and evaluated lanes. Pixel state lives in
+/// block vectors (detail::TileBlocks: 16 blocks of 4x4 pixels, detail::BlockVec: kChunks vectors
+/// per block); a splat visits only the blocks its pixel rectangle touches.
 template <class S, int C, int MaxC, bool Depth>
-inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const BlendOutputs<S>& out) {
+inline BlendTileCount blend_tile_fwd(const BlendInputs<S>& in, int tile, const BlendOutputs<S>& out) {
   using TBk = detail::TileBlocks;
   constexpr int NC = C > 0 ? C : MaxC;
   using K = BlendConstants<S>;
@@ -423,7 +430,7 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
     live |= std::uint32_t(TBk::kSide * (b % TBk::kPerSide) < tb.w && TBk::kSide * (b / TBk::kPerSide) < tb.h) << b;
   const std::uint64_t begin = in.bins->tile_offset[std::size_t(tile)], end = in.bins->tile_offset[std::size_t(tile) + 1];
   const std::uint32_t* list = in.bins->tile_list.data();
-  std::uint64_t j = begin, fragments = 0;
+  std::uint64_t j = begin, fragments = 0, chunks = 0;
   detail::BlendBatch<S, NC> batch;
   for (; j < end; j += kBlendBatch) {
     if (j != begin) {
@@ -462,6 +469,7 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
     }
     // Pass 3: the alpha of every listed chunk.
     batch.alphas(max_alpha);
+    chunks += std::uint64_t(batch.chunks);
     // Pass 4: blend the listed chunks, in list order.
     std::uint32_t blocks_blended[kBlendBatch] = {};
     for (int i = 0; i < batch.chunks; ++i) {
@@ -515,7 +523,7 @@ inline std::uint64_t blend_tile_fwd(const BlendInputs<S>& in, int tile, const Bl
       for (int ch = 0; ch < nc; ++ch) img[i * nc + ch] = acc[ch][q][k % L];
     }
   });
-  return fragments;
+  return BlendTileCount{fragments, chunks * std::uint64_t(L)};
 }
 
 /// Backward of blend_tile_fwd for one tile: walks the tile's list back to front, rebuilding each

@@ -315,6 +315,8 @@ class Rasterizer {
   const std::vector<std::int32_t>& radii() const { return radii_; }
   /// Blended pixel-Gaussian pairs in the last forward.
   std::uint64_t fragments() const { return fragments_; }
+  /// Lanes the blend evaluated in the last forward (BlendTileCount); fragments() of them blended.
+  std::uint64_t blend_lanes() const { return blend_lanes_; }
   /// Gaussian-tile pairs in the last forward.
   std::uint64_t intersections() const { return bins_.pairs(); }
   /// Number of Gaussians that survived culling in the last forward.
@@ -628,15 +630,20 @@ class Rasterizer {
     detail::resize_for_overwrite(block_mask_, bins_.pairs());  // written for every pair
     out.block_mask = block_mask_.data();
     order_tiles();
-    std::uint64_t frags = 0;
+    std::uint64_t frags = 0, lanes = 0;
     dispatch_channels([&]<int C>() {
       const BlendInputs<S> in = blend_inputs();
       const int tiles = grid_.count();
       const int* order = tile_order_.data();
-#pragma omp parallel for schedule(dynamic, 1) reduction(+ : frags)
-      for (int i = 0; i < tiles; ++i) frags += blend_tile_fwd<S, C, kBands, Opt.depth>(in, order[i], out);
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : frags, lanes)
+      for (int i = 0; i < tiles; ++i) {
+        const BlendTileCount c = blend_tile_fwd<S, C, kBands, Opt.depth>(in, order[i], out);
+        frags += c.fragments;
+        lanes += c.lanes;
+      }
     });
     fragments_ = frags;
+    blend_lanes_ = lanes;
   }
 
   /// The order the blend passes take the tiles in: longest list first, so that the tiles taken
@@ -787,7 +794,7 @@ class Rasterizer {
   std::vector<S> transmittance_;       // [H, W]
   std::vector<std::uint32_t> last_;    // [H, W]
   detail::OverwriteVector<std::uint16_t> block_mask_;  // [M] tile blocks each intersection blended into
-  std::uint64_t fragments_ = 0;
+  std::uint64_t fragments_ = 0, blend_lanes_ = 0;
   std::vector<int> tile_order_;        // [tiles] the blend passes' order (order_tiles)
   detail::OverwriteVector<S> records_;  // [M, BlendRecord<depth, absgrad>::size(count)] in pair order (Binning::pair_index)
   std::vector<S> bg_partial_;          // [tiles, count]
