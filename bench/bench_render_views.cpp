@@ -10,9 +10,9 @@
 // project_s, bin_s, blend_s, loss_s, blend_backward_s, gaussians_backward_s; and views/s,
 // fragments/s (blended fragments of the forward per second of the whole pass), fragments_per_view,
 // visible_per_view, lane_use (the share of the blend's evaluated lanes that blended,
-// Rasterizer::blend_lanes). The label is a hash of every rendered image, alpha image and gradient row of
-// the seen Gaussians in one untimed pass before the timed ones: two builds that give the same
-// label computed the same bits on this scene.
+// Rasterizer::blend_lanes). The label is a hash of every rendered image, alpha image and gradient
+// row of the seen Gaussians in one untimed pass before the timed ones: two builds that give the
+// same label computed the same bits on this scene.
 //
 // The scene and the model come from the environment (the benchmark is skipped without them):
 //   MSGS_BENCH_DATA    the dataset directory (any layout `msgs train --data` reads)

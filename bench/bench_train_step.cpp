@@ -20,9 +20,9 @@
 // split the forward, blend_backward_ms and gaussians_backward_ms the backward. fragments (blended
 // pixel-Gaussian pairs), intersections (Gaussian-tile pairs), blend_ns_per_fragment (blend
 // forward + backward per fragment) and lane_use (the share of the blend's evaluated lanes that
-// blended) measure the per-pixel work, which the bound does not count.
-// Except in the dense_zeroed cases, the colour update of the visible Gaussians runs inside the backward (as in
-// training, TrainOptions::fused_colour) and counts in gaussians_backward_ms, not in adam_ms.
+// blended) measure the per-pixel work, which the bound does not count. Except in the dense_zeroed
+// cases, the colour update of the visible Gaussians runs inside the backward (as in training,
+// TrainOptions::fused_colour) and counts in gaussians_backward_ms, not in adam_ms.
 //
 //   ./build/bench/bench_train_step
 //   ./build/bench/bench_train_step --benchmark_filter='100k_240x180' --benchmark_min_time=0.2   # the demo's image size
