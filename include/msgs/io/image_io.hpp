@@ -313,6 +313,13 @@ inline Image<float> read_tiff(const std::filesystem::path& p, std::size_t file_s
     if (tile_bytes <= 0 || double(tile_bytes) < double(tw) * double(th) * double(spp) * double(bits / 8))
       fail(p, cat("TIFF tiles hold fewer bytes than ", std::to_string(tw), "x", std::to_string(th), " pixels of ",
                   std::to_string(spp), " samples"));
+    // The tile size comes from tags of its own: a tile far larger than the image (which the size
+    // check above bounds) would be allocated before a byte of it is read. A tile is decoded from
+    // the file, so the same compression bound applies to it.
+    if (double(tile_bytes) > 4096.0 * double(file_size) + 16.0 * 1024 * 1024)
+      fail(p, cat("TIFF header claims tiles of ", std::to_string(tw), "x", std::to_string(th), "x", std::to_string(spp),
+                  " samples (", std::to_string(tile_bytes), " bytes) but the file has only ", file_size,
+                  " bytes (corrupt header?)"));
     std::vector<unsigned char> tile(static_cast<std::size_t>(tile_bytes));
     for (std::uint32_t ty = 0; ty < h; ty += th)
       for (std::uint32_t tx = 0; tx < w; tx += tw) {
