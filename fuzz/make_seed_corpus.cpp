@@ -3,8 +3,10 @@
 // the seeds are valid files a fuzzer mutates from. Run once after a format change: make_seed_corpus <dir>.
 #include <stb/stb_image_write.h>
 
+#include <algorithm>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -16,6 +18,40 @@ namespace fs = std::filesystem;
 using namespace msgs;
 
 namespace {
+
+/// A TIFF written with libtiff in a layout msgs' own writer does not produce (tiles, float
+/// samples, separate planes, compression), so that the fuzzer starts from every branch of the
+/// reader. `tile` 0 writes strips of 2 rows.
+void write_tiff_layout(const fs::path& p, unsigned w, unsigned h, int bits, int samples, int format, int planar,
+                       int compression, unsigned tile) {
+  TIFF* tif = TIFFOpen(p.c_str(), "w");
+  if (!tif) {
+    std::fprintf(stderr, "cannot write %s\n", p.c_str());
+    std::exit(1);
+  }
+  TIFFSetField(tif, TIFFTAG_IMAGEWIDTH, w);
+  TIFFSetField(tif, TIFFTAG_IMAGELENGTH, h);
+  TIFFSetField(tif, TIFFTAG_BITSPERSAMPLE, bits);
+  TIFFSetField(tif, TIFFTAG_SAMPLESPERPIXEL, samples);
+  TIFFSetField(tif, TIFFTAG_SAMPLEFORMAT, format);
+  TIFFSetField(tif, TIFFTAG_PLANARCONFIG, planar);
+  TIFFSetField(tif, TIFFTAG_COMPRESSION, compression);
+  TIFFSetField(tif, TIFFTAG_PHOTOMETRIC, samples == 3 ? PHOTOMETRIC_RGB : PHOTOMETRIC_MINISBLACK);
+  const unsigned bytes = unsigned(bits / 8), per_pixel = planar == PLANARCONFIG_CONTIG ? unsigned(samples) : 1u;
+  std::vector<unsigned char> buf(std::size_t(std::max(w, tile)) * std::max(tile, 1u) * per_pixel * bytes);
+  for (std::size_t i = 0; i < buf.size(); ++i) buf[i] = static_cast<unsigned char>(i * 29 % 251);
+  if (tile > 0) {
+    TIFFSetField(tif, TIFFTAG_TILEWIDTH, tile);
+    TIFFSetField(tif, TIFFTAG_TILELENGTH, tile);
+    for (unsigned ty = 0; ty < h; ty += tile)
+      for (unsigned tx = 0; tx < w; tx += tile) TIFFWriteTile(tif, buf.data(), tx, ty, 0, 0);
+  } else {
+    TIFFSetField(tif, TIFFTAG_ROWSPERSTRIP, 2u);
+    for (int s = 0; s < (planar == PLANARCONFIG_CONTIG ? 1 : samples); ++s)
+      for (unsigned y = 0; y < h; ++y) TIFFWriteScanline(tif, buf.data(), y, static_cast<std::uint16_t>(s));
+  }
+  TIFFClose(tif);
+}
 
 Image<float> ramp(int w, int h, int c) {
   Image<float> img(w, h, c);
@@ -94,12 +130,19 @@ int main(int argc, char** argv) {
     text(out / "ply" / "points_big_endian.ply", s);
   }
 
-  // Images: PNG 8/16-bit, TIFF 16-bit, JPEG, BMP, npy.
+  // Images: PNG 8/16-bit, TIFF (16-bit strips; tiled, float, separate planes, compressed), JPEG,
+  // BMP, npy.
   io::write_png8(out / "image" / "grey8.png", ramp(5, 3, 1));
   io::write_png16(out / "image" / "rgba16.png", ramp(4, 3, 4));
   io::write_tiff16(out / "image" / "grey16.tif", ramp(6, 4, 1));
   io::write_tiff16(out / "image" / "rgb16.tif", ramp(3, 2, 3));
   io::write_npy(out / "image" / "rgb.npy", ramp(3, 2, 3));
+  write_tiff_layout(out / "image" / "tiled8_deflate.tif", 20, 18, 8, 3, SAMPLEFORMAT_UINT, PLANARCONFIG_CONTIG,
+                    COMPRESSION_ADOBE_DEFLATE, 16);
+  write_tiff_layout(out / "image" / "float32_lzw.tif", 5, 4, 32, 1, SAMPLEFORMAT_IEEEFP, PLANARCONFIG_CONTIG,
+                    COMPRESSION_LZW, 0);
+  write_tiff_layout(out / "image" / "planes16.tif", 4, 3, 16, 2, SAMPLEFORMAT_UINT, PLANARCONFIG_SEPARATE,
+                    COMPRESSION_NONE, 0);
   {
     std::vector<unsigned char> px(16 * 8 * 3);
     for (std::size_t i = 0; i < px.size(); ++i) px[i] = static_cast<unsigned char>(i * 7);

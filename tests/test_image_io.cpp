@@ -1,5 +1,6 @@
 // tests/test_image_io.cpp
-// Tests for include/msgs/io/image_io.hpp: PNG 8/16-bit, TIFF 8/16-bit, .npy round trips, bad files, downscale.
+// Tests for include/msgs/io/image_io.hpp: PNG 8/16-bit, TIFF (8/16-bit, float, tiled, compressed, planes),
+// .npy round trips, bad files, downscale.
 #include <doctest/doctest.h>
 
 #include <cstdlib>
@@ -109,6 +110,112 @@ TEST_CASE("8-bit TIFF written with libtiff directly reads as value / 255") {
   CHECK(img.at(1, 0, 0) == doctest::Approx(0.2f));
   CHECK(img.at(3, 0, 0) == doctest::Approx(1.0f));
   CHECK(img.at(3, 1, 0) == doctest::Approx(4.0f / 255.0f));
+}
+
+/// The value of sample c of pixel (x, y) in the layout tests below: distinct everywhere.
+static unsigned tiff_test_value(unsigned x, unsigned y, unsigned c) { return (x * 7u + y * 13u + c * 61u) % 251u; }
+
+/// Opens `p` for writing with the common tags of the layout tests (nullptr if it cannot be).
+static TIFF* open_tiff(const fs::path& p, unsigned w, unsigned h, int bits, int samples, int format, int planar,
+                       int compression, int photometric) {
+  TIFF* tif = TIFFOpen(p.c_str(), "w");
+  if (!tif) return nullptr;
+  TIFFSetField(tif, TIFFTAG_IMAGEWIDTH, w);
+  TIFFSetField(tif, TIFFTAG_IMAGELENGTH, h);
+  TIFFSetField(tif, TIFFTAG_BITSPERSAMPLE, bits);
+  TIFFSetField(tif, TIFFTAG_SAMPLESPERPIXEL, samples);
+  TIFFSetField(tif, TIFFTAG_SAMPLEFORMAT, format);
+  TIFFSetField(tif, TIFFTAG_PLANARCONFIG, planar);
+  TIFFSetField(tif, TIFFTAG_COMPRESSION, compression);
+  TIFFSetField(tif, TIFFTAG_PHOTOMETRIC, photometric);
+  return tif;
+}
+
+// Reflectance maps from photogrammetry tools and GeoTIFF exports come tiled, compressed, in
+// 32-bit float or with separate planes; cameras write 16-bit strips. Every layout the reader
+// accepts is read back value for value.
+TEST_CASE("TIFF layouts: tiled, compressed, float, separate planes and min-is-white read exactly") {
+  const auto dir = scratch("tiff_layouts");
+  SUBCASE("tiled 8-bit RGB, deflate, edge tiles cut by the image") {
+    const unsigned w = 21, h = 18, tw = 16, th = 16;
+    const auto p = dir / "tiled.tif";
+    TIFF* tif = open_tiff(p, w, h, 8, 3, SAMPLEFORMAT_UINT, PLANARCONFIG_CONTIG, COMPRESSION_ADOBE_DEFLATE, PHOTOMETRIC_RGB);
+    REQUIRE(tif);
+    TIFFSetField(tif, TIFFTAG_TILEWIDTH, tw);
+    TIFFSetField(tif, TIFFTAG_TILELENGTH, th);
+    std::vector<unsigned char> tile(tw * th * 3);
+    for (unsigned ty = 0; ty < h; ty += th)
+      for (unsigned tx = 0; tx < w; tx += tw) {
+        for (unsigned y = 0; y < th; ++y)
+          for (unsigned x = 0; x < tw; ++x)
+            for (unsigned c = 0; c < 3; ++c)
+              tile[(y * tw + x) * 3 + c] = static_cast<unsigned char>(tiff_test_value(tx + x, ty + y, c));
+        REQUIRE(TIFFWriteTile(tif, tile.data(), tx, ty, 0, 0) >= 0);
+      }
+    TIFFClose(tif);
+    const auto img = read_image(p);
+    REQUIRE(img.width == int(w));
+    REQUIRE(img.height == int(h));
+    REQUIRE(img.channels == 3);
+    for (unsigned y = 0; y < h; ++y)
+      for (unsigned x = 0; x < w; ++x)
+        for (unsigned c = 0; c < 3; ++c) REQUIRE(img.at(int(x), int(y), int(c)) == float(tiff_test_value(x, y, c)) * (1.0f / 255.0f));
+  }
+  SUBCASE("32-bit float, LZW strips of 3 rows: values as stored, negatives included") {
+    const unsigned w = 7, h = 5;
+    const auto p = dir / "float.tif";
+    TIFF* tif = open_tiff(p, w, h, 32, 1, SAMPLEFORMAT_IEEEFP, PLANARCONFIG_CONTIG, COMPRESSION_LZW, PHOTOMETRIC_MINISBLACK);
+    REQUIRE(tif);
+    TIFFSetField(tif, TIFFTAG_ROWSPERSTRIP, 3u);
+    std::vector<float> row(w);
+    for (unsigned y = 0; y < h; ++y) {
+      for (unsigned x = 0; x < w; ++x) row[x] = float(tiff_test_value(x, y, 0)) / 100.0f - 0.5f;
+      REQUIRE(TIFFWriteScanline(tif, row.data(), y, 0) >= 0);
+    }
+    TIFFClose(tif);
+    const auto img = read_image(p);
+    REQUIRE(img.channels == 1);
+    for (unsigned y = 0; y < h; ++y)
+      for (unsigned x = 0; x < w; ++x) REQUIRE(img.at(int(x), int(y), 0) == float(tiff_test_value(x, y, 0)) / 100.0f - 0.5f);
+  }
+  SUBCASE("16-bit, four separate planes") {
+    const unsigned w = 6, h = 4;
+    const auto p = dir / "planes.tif";
+    TIFF* tif = open_tiff(p, w, h, 16, 4, SAMPLEFORMAT_UINT, PLANARCONFIG_SEPARATE, COMPRESSION_NONE, PHOTOMETRIC_MINISBLACK);
+    REQUIRE(tif);
+    const std::uint16_t extra = EXTRASAMPLE_UNSPECIFIED;
+    const std::uint16_t extras[3] = {extra, extra, extra};
+    TIFFSetField(tif, TIFFTAG_EXTRASAMPLES, 3, extras);
+    std::vector<std::uint16_t> row(w);
+    for (unsigned c = 0; c < 4; ++c)
+      for (unsigned y = 0; y < h; ++y) {
+        for (unsigned x = 0; x < w; ++x) row[x] = static_cast<std::uint16_t>(tiff_test_value(x, y, c) * 257u);
+        REQUIRE(TIFFWriteScanline(tif, row.data(), y, static_cast<std::uint16_t>(c)) >= 0);
+      }
+    TIFFClose(tif);
+    const auto img = read_image(p);
+    REQUIRE(img.channels == 4);
+    for (unsigned y = 0; y < h; ++y)
+      for (unsigned x = 0; x < w; ++x)
+        for (unsigned c = 0; c < 4; ++c)
+          REQUIRE(img.at(int(x), int(y), int(c)) == float(tiff_test_value(x, y, c) * 257u) * (1.0f / 65535.0f));
+  }
+  SUBCASE("8-bit min-is-white reads as 1 - value / 255") {
+    const unsigned w = 4, h = 2;
+    const auto p = dir / "white.tif";
+    TIFF* tif = open_tiff(p, w, h, 8, 1, SAMPLEFORMAT_UINT, PLANARCONFIG_CONTIG, COMPRESSION_NONE, PHOTOMETRIC_MINISWHITE);
+    REQUIRE(tif);
+    std::vector<unsigned char> row(w);
+    for (unsigned y = 0; y < h; ++y) {
+      for (unsigned x = 0; x < w; ++x) row[x] = static_cast<unsigned char>(tiff_test_value(x, y, 0));
+      REQUIRE(TIFFWriteScanline(tif, row.data(), y, 0) >= 0);
+    }
+    TIFFClose(tif);
+    const auto img = read_image(p);
+    for (unsigned y = 0; y < h; ++y)
+      for (unsigned x = 0; x < w; ++x)
+        REQUIRE(img.at(int(x), int(y), 0) == 1.0f - float(tiff_test_value(x, y, 0)) * (1.0f / 255.0f));
+  }
 }
 
 TEST_CASE("a YCbCr TIFF is refused with a clear error, not read past its rows") {
