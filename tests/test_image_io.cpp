@@ -84,17 +84,25 @@ TEST_CASE("16-bit TIFF round trip, 1 and 3 channels") {
   }
 }
 
-/// A 4x2 8-bit contiguous TIFF opened for writing with libtiff itself (nullptr if it cannot be).
-static TIFF* open_tiff_8bit(const fs::path& p, int samples, int photometric) {
+/// Opens `p` for writing with libtiff itself, with these tags set (nullptr if it cannot be).
+static TIFF* open_tiff(const fs::path& p, unsigned w, unsigned h, int bits, int samples, int format, int planar,
+                       int compression, int photometric) {
   TIFF* tif = TIFFOpen(p.c_str(), "w");
   if (!tif) return nullptr;
-  TIFFSetField(tif, TIFFTAG_IMAGEWIDTH, 4u);
-  TIFFSetField(tif, TIFFTAG_IMAGELENGTH, 2u);
-  TIFFSetField(tif, TIFFTAG_BITSPERSAMPLE, 8);
+  TIFFSetField(tif, TIFFTAG_IMAGEWIDTH, w);
+  TIFFSetField(tif, TIFFTAG_IMAGELENGTH, h);
+  TIFFSetField(tif, TIFFTAG_BITSPERSAMPLE, bits);
   TIFFSetField(tif, TIFFTAG_SAMPLESPERPIXEL, samples);
+  TIFFSetField(tif, TIFFTAG_SAMPLEFORMAT, format);
+  TIFFSetField(tif, TIFFTAG_PLANARCONFIG, planar);
+  TIFFSetField(tif, TIFFTAG_COMPRESSION, compression);
   TIFFSetField(tif, TIFFTAG_PHOTOMETRIC, photometric);
-  TIFFSetField(tif, TIFFTAG_PLANARCONFIG, PLANARCONFIG_CONTIG);
   return tif;
+}
+
+/// A 4x2 8-bit contiguous uncompressed TIFF.
+static TIFF* open_tiff_8bit(const fs::path& p, int samples, int photometric) {
+  return open_tiff(p, 4, 2, 8, samples, SAMPLEFORMAT_UINT, PLANARCONFIG_CONTIG, COMPRESSION_NONE, photometric);
 }
 
 TEST_CASE("8-bit TIFF written with libtiff directly reads as value / 255") {
@@ -114,22 +122,6 @@ TEST_CASE("8-bit TIFF written with libtiff directly reads as value / 255") {
 
 /// The value of sample c of pixel (x, y) in the layout tests below: distinct everywhere.
 static unsigned tiff_test_value(unsigned x, unsigned y, unsigned c) { return (x * 7u + y * 13u + c * 61u) % 251u; }
-
-/// Opens `p` for writing with the common tags of the layout tests (nullptr if it cannot be).
-static TIFF* open_tiff(const fs::path& p, unsigned w, unsigned h, int bits, int samples, int format, int planar,
-                       int compression, int photometric) {
-  TIFF* tif = TIFFOpen(p.c_str(), "w");
-  if (!tif) return nullptr;
-  TIFFSetField(tif, TIFFTAG_IMAGEWIDTH, w);
-  TIFFSetField(tif, TIFFTAG_IMAGELENGTH, h);
-  TIFFSetField(tif, TIFFTAG_BITSPERSAMPLE, bits);
-  TIFFSetField(tif, TIFFTAG_SAMPLESPERPIXEL, samples);
-  TIFFSetField(tif, TIFFTAG_SAMPLEFORMAT, format);
-  TIFFSetField(tif, TIFFTAG_PLANARCONFIG, planar);
-  TIFFSetField(tif, TIFFTAG_COMPRESSION, compression);
-  TIFFSetField(tif, TIFFTAG_PHOTOMETRIC, photometric);
-  return tif;
-}
 
 // Reflectance maps from photogrammetry tools and GeoTIFF exports come tiled, compressed, in
 // 32-bit float or with separate planes; cameras write 16-bit strips. Every layout the reader
