@@ -316,10 +316,7 @@ inline Image<float> read_tiff(const std::filesystem::path& p, std::size_t file_s
     // The tile size comes from tags of its own: a tile far larger than the image (which the size
     // check above bounds) would be allocated before a byte of it is read. A tile is decoded from
     // the file, so the same compression bound applies to it.
-    if (double(tile_bytes) > 4096.0 * double(file_size) + 16.0 * 1024 * 1024)
-      fail(p, cat("TIFF header claims tiles of ", std::to_string(tw), "x", std::to_string(th), "x", std::to_string(spp),
-                  " samples (", std::to_string(tile_bytes), " bytes) but the file has only ", file_size,
-                  " bytes (corrupt header?)"));
+    check_plausible_size(p, "TIFF tile", tw, th, spp, double(tile_bytes), file_size, 4096.0);
     std::vector<unsigned char> tile(static_cast<std::size_t>(tile_bytes));
     for (std::uint32_t ty = 0; ty < h; ty += th)
       for (std::uint32_t tx = 0; tx < w; tx += tw) {
