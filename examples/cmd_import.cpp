@@ -26,6 +26,7 @@
 #include <msgs/io/dataset.hpp>
 #include <msgs/io/file.hpp>
 #include <msgs/io/image_io.hpp>
+#include <msgs/io/match_pairs.hpp>
 #include <msgs/io/ply.hpp>
 #include <msgs/io/radiometry.hpp>
 
@@ -41,7 +42,8 @@ using msgs::io::fail;
 constexpr const char* kUsage =
     "usage: msgs import --images DIR --out DIR [--camera auto|micasense|dji|sequoia]\n"
     "                   [--bands PATTERN=ID,...] [--eval-every N] [--camera-model M]\n"
-    "                   [--radiometry auto|none] [--allow-partial] [--force]\n"
+    "                   [--radiometry auto|none] [--matching exhaustive|window]\n"
+    "                   [--window N] [--allow-partial] [--force]\n"
     "                   [--colmap BIN] [--exiv2 BIN] [--keep-work]\n"
     "\n"
     "Turn a folder of raw multi-band captures into the multi-spectral dataset layout (transforms.json,\n"
@@ -56,8 +58,9 @@ constexpr const char* kUsage =
     "     as 16-bit PNG and recorded per frame under \"radiometry\" in transforms.json. Steps whose\n"
     "     tags are missing are left out for that band, with a warning naming the files.\n"
     "  3. Poses with COLMAP on the CPU (feature_extractor with one camera per band and the focal\n"
-    "     length from the metadata as prior, exhaustive_matcher, mapper) on 8-bit copies; the\n"
-    "     largest model is kept. Every image must register (else an error names the ones that did not).\n"
+    "     length from the metadata as prior; matching of every pair or of a window of captures;\n"
+    "     mapper) on 8-bit copies; the largest model is kept. Every image must register (else an\n"
+    "     error names the ones that did not).\n"
     "Everything is built in a temporary folder beside --out and renamed into place at the end.\n"
     "\n"
     "  --images DIR        folder of captures (searched recursively)\n"
@@ -70,6 +73,13 @@ constexpr const char* kUsage =
     "  --eval-every N      every N-th capture (all its bands) goes to eval (default 10; 0: none)\n"
     "  --camera-model M    COLMAP camera model: OPENCV (default), PINHOLE, SIMPLE_RADIAL, RADIAL\n"
     "  --radiometry R      auto (default: use the metadata) or none (keep the stored values)\n"
+    "  --matching M        image pairs COLMAP matches: exhaustive (default: every pair; the time\n"
+    "                      grows with the square of the image count) or window (the bands of a\n"
+    "                      capture with each other, and each band with the same band of the next\n"
+    "                      --window captures in file-name order: for long flights whose captures\n"
+    "                      are numbered along the path; views that come back later are not matched)\n"
+    "  --window N          captures ahead that window matching reaches (default 6: a point on the\n"
+    "                      ground is in about 4 to 6 consecutive captures at 75-80% forward overlap)\n"
     "  --allow-partial     drop images COLMAP could not register (with a warning) instead of failing\n"
     "  --force             replace an existing --out once the new dataset is complete\n"
     "  --colmap BIN        COLMAP executable (default: colmap on PATH)\n"
@@ -187,7 +197,8 @@ nlohmann::ordered_json opt_number(const std::optional<double>& v) {
 
 int run_import(const std::vector<std::string>& argv) {
   const msgs::cli::Args args(argv,
-                             {"images", "out", "camera", "bands", "eval-every", "camera-model", "radiometry", "colmap", "exiv2"},
+                             {"images", "out", "camera", "bands", "eval-every", "camera-model", "radiometry", "matching", "window",
+                              "colmap", "exiv2"},
                              {"force", "allow-partial", "keep-work", "help"});
   if (args.flag("help")) {
     std::fputs(kUsage, stdout);
@@ -218,6 +229,11 @@ int run_import(const std::vector<std::string>& argv) {
   const std::string radiometry = args.get("radiometry", "auto");
   if (radiometry != "auto" && radiometry != "none")
     throw msgs::cli::UsageError("--radiometry expects auto or none, got '" + radiometry + "'");
+  const std::string matching = args.get("matching", "exhaustive");
+  if (matching != "exhaustive" && matching != "window")
+    throw msgs::cli::UsageError("--matching expects exhaustive or window, got '" + matching + "'");
+  const long window = args.integer("window", 6);
+  if (window < 1) throw msgs::cli::UsageError("--window expects a positive number of captures");
 
   std::error_code ec;
   if (!fs::is_directory(images, ec)) fail(images, "--images folder does not exist or is not a folder");
@@ -437,8 +453,32 @@ int run_import(const std::vector<std::string>& argv) {
     t_features += run_colmap(colmap->string(), "feature_extractor", a, log);
   }
   timings["features"] = t_features;
-  timings["matching"] = run_colmap(colmap->string(), "exhaustive_matcher",
-                                   {"--database_path", db, "--SiftMatching.use_gpu", "0"}, log);
+  // Every pair by default: the window (msgs/io/match_pairs.hpp) misses the views a path comes
+  // back to, which a walk around a building or the next line of a survey grid does.
+  if (matching == "exhaustive") {
+    const std::size_t n_pairs = msgs::io::exhaustive_pair_count(items.size());
+    std::printf("  matching every pair: %zu\n", n_pairs);
+    // About 0.03 s (320x240) to 0.4 s (1024x768) a pair on two cores: beyond 20k pairs, hours.
+    if (n_pairs > 20000)
+      std::printf("  note: that many pairs take hours; --matching window matches only the captures near each "
+                  "other in flight order\n");
+    timings["matching"] = run_colmap(colmap->string(), "exhaustive_matcher",
+                                     {"--database_path", db, "--SiftMatching.use_gpu", "0"}, log);
+  } else {
+    std::vector<msgs::io::PairImage> pi;
+    for (const Item& it : items) pi.push_back({it.capture, it.band});
+    const auto pairs = msgs::io::window_pairs(pi, std::size_t(window));
+    std::string text;
+    for (const auto& [i, j] : pairs) text += items[i].colmap_name + " " + items[j].colmap_name + "\n";
+    const fs::path list = work / "match_pairs.txt";
+    msgs::io::write_text_atomic(list, text);
+    std::printf("  matching a window of %ld captures: %zu of the %zu pairs\n", window, pairs.size(),
+                msgs::io::exhaustive_pair_count(items.size()));
+    timings["matching"] = run_colmap(colmap->string(), "matches_importer",
+                                     {"--database_path", db, "--match_list_path", list.string(), "--match_type", "pairs",
+                                      "--SiftMatching.use_gpu", "0"},
+                                     log);
+  }
   fs::create_directories(work / "sparse", ec);
   timings["mapping"] = run_colmap(colmap->string(), "mapper",
                                   {"--database_path", db, "--image_path", (work / "images").string(), "--output_path",
@@ -502,6 +542,7 @@ int run_import(const std::vector<std::string>& argv) {
   meta_json["images"] = items.size();
   meta_json["mean_reprojection_error_px"] = opt_number(reproj);
   meta_json["colmap_camera_model"] = model;
+  meta_json["colmap_matching"] = matching == "window" ? cat("window ", window) : matching;
   tf["msgs_import"] = meta_json;
   nlohmann::ordered_json frames = nlohmann::ordered_json::array();
   std::vector<std::string> train, eval;

@@ -220,6 +220,49 @@ TEST_CASE("msgs import: synthetic MicaSense captures through exiv2 + COLMAP") {
   }
 }
 
+TEST_CASE("msgs import --matching window: the pairs of a window of captures register the whole set") {
+  if (!on_path("colmap")) {
+    MESSAGE("SKIPPED: the colmap binary is not on PATH");
+    return;
+  }
+  const fs::path dir = msgs::testing::scratch_dir("import") / "window";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  msgs::synth::RawOptions opt;  // the set of the end-to-end case above
+  opt.camera = "micasense";
+  opt.preset = "small";
+  opt.captures = 5;
+  opt.width = 160;
+  opt.seed = 3;
+  msgs::synth::write_synthetic_raw(dir / "raw", opt);
+  const auto import = [&](const std::string& flags, const std::string& out) {
+    const int rc = run(std::string(MSGS_BIN) + " import --images '" + (dir / "raw").string() + "' --out '" +
+                           (dir / out).string() + "' --radiometry none " + flags,
+                       dir / (out + ".log"));
+    return std::make_pair(rc, slurp(dir / (out + ".log")));
+  };
+  // 20 images: 190 pairs in all; a window of 2 captures keeps the 30 within the captures and the
+  // 28 of one band 1 or 2 captures apart.
+  const auto [rc, log] = import("--matching window --window 2", "ds");
+  REQUIRE_MESSAGE(rc == 0, log);
+  CHECK_MESSAGE(log.find("matching a window of 2 captures: 58 of the 190 pairs") != std::string::npos, log);
+  const msgs::io::Dataset ds = msgs::io::load_dataset(dir / "ds");
+  CHECK(ds.frames.size() == 20);
+  const Json tf = Json::parse(slurp(dir / "ds" / "transforms.json"));
+  CHECK(tf["msgs_import"]["colmap_matching"] == "window 2");
+  CHECK(tf["msgs_import"]["registered"] == 20);
+  CHECK(tf["msgs_import"]["mean_reprojection_error_px"].get<double>() < 1.0);
+
+  // Bad values are refused before any work, naming the option.
+  const auto [rc_bad, log_bad] = import("--matching sequential", "bad");
+  CHECK(rc_bad != 0);
+  CHECK_MESSAGE(log_bad.find("--matching expects exhaustive or window") != std::string::npos, log_bad);
+  const auto [rc_w0, log_w0] = import("--matching window --window 0", "bad");
+  CHECK(rc_w0 != 0);
+  CHECK_MESSAGE(log_w0.find("--window expects a positive number") != std::string::npos, log_w0);
+  CHECK(!fs::exists(dir / "bad"));
+}
+
 TEST_CASE("msgs import: COLMAP failure leaves no output and no temporary folder") {
   if (!on_path("colmap")) {
     MESSAGE("SKIPPED: the colmap binary is not on PATH");
