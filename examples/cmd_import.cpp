@@ -1,12 +1,14 @@
 // examples/cmd_import.cpp
 // `msgs import`: a folder of raw multi-band captures (MicaSense, DJI Mavic 3M, Parrot Sequoia, or
 // explicit file-name patterns) -> the multi-spectral dataset layout: radiometric normalisation from
-// the metadata (read with the exiv2 tool), poses and a sparse point cloud from COLMAP (CPU).
+// the metadata (read with the exiv2 tool), poses and a sparse point cloud from COLMAP (CPU), from
+// every pair of images or from the pairs of nearby captures (msgs/io/match_pairs.hpp).
 // File-name recognition, metadata parsing and the normalisation maths live in the library
 // (msgs/io/capture_names.hpp, capture_meta.hpp, radiometry.hpp); this file runs the tools.
 #include <tiffio.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -42,8 +44,8 @@ using msgs::io::fail;
 constexpr const char* kUsage =
     "usage: msgs import --images DIR --out DIR [--camera auto|micasense|dji|sequoia]\n"
     "                   [--bands PATTERN=ID,...] [--eval-every N] [--camera-model M]\n"
-    "                   [--radiometry auto|none] [--matching exhaustive|window]\n"
-    "                   [--window N] [--allow-partial] [--force]\n"
+    "                   [--radiometry auto|none] [--matching exhaustive|window|gps]\n"
+    "                   [--window N] [--neighbours K] [--allow-partial] [--force]\n"
     "                   [--colmap BIN] [--exiv2 BIN] [--keep-work]\n"
     "\n"
     "Turn a folder of raw multi-band captures into the multi-spectral dataset layout (transforms.json,\n"
@@ -58,9 +60,9 @@ constexpr const char* kUsage =
     "     as 16-bit PNG and recorded per frame under \"radiometry\" in transforms.json. Steps whose\n"
     "     tags are missing are left out for that band, with a warning naming the files.\n"
     "  3. Poses with COLMAP on the CPU (feature_extractor with one camera per band and the focal\n"
-    "     length from the metadata as prior; matching of every pair or of a window of captures;\n"
-    "     mapper) on 8-bit copies; the largest model is kept. Every image must register (else an\n"
-    "     error names the ones that did not).\n"
+    "     length from the metadata as prior; matching of every pair, of nearby captures by GPS or\n"
+    "     of a window of captures; mapper) on 8-bit copies; the largest model is kept. Every image\n"
+    "     must register (else an error names the ones that did not).\n"
     "Everything is built in a temporary folder beside --out and renamed into place at the end.\n"
     "\n"
     "  --images DIR        folder of captures (searched recursively)\n"
@@ -78,8 +80,13 @@ constexpr const char* kUsage =
     "                      capture with each other, and each band with the same band of the next\n"
     "                      --window captures in file-name order: for long flights whose captures\n"
     "                      are numbered along the path; views that come back later are not matched)\n"
+    "                      or gps (the bands of a capture with each other, and each band with the\n"
+    "                      same band of the --neighbours captures nearest by the GPS positions in\n"
+    "                      the metadata: for long flights, whatever their order)\n"
     "  --window N          captures ahead that window matching reaches (default 6: a point on the\n"
     "                      ground is in about 4 to 6 consecutive captures at 75-80% forward overlap)\n"
+    "  --neighbours K      nearest captures that gps matching pairs each capture with (default 12:\n"
+    "                      about 5 along a survey line times 3 across at 75% / 65% overlap)\n"
     "  --allow-partial     drop images COLMAP could not register (with a warning) instead of failing\n"
     "  --force             replace an existing --out once the new dataset is complete\n"
     "  --colmap BIN        COLMAP executable (default: colmap on PATH)\n"
@@ -195,10 +202,41 @@ nlohmann::ordered_json opt_number(const std::optional<double>& v) {
   return v ? nlohmann::ordered_json(*v) : nlohmann::ordered_json(nullptr);
 }
 
+/// Each capture's position in metres (east, north, up of the first capture), the mean of the GPS
+/// positions of its images. A capture without one is an error naming its files and what was wrong.
+std::vector<std::array<double, 3>> capture_positions(const std::vector<Item>& items, std::size_t captures,
+                                                     const fs::path& images) {
+  std::vector<std::array<double, 3>> sum(captures, {0.0, 0.0, 0.0});
+  std::vector<int> n(captures, 0);
+  std::vector<std::string> missing;
+  for (const Item& it : items) {
+    if (!it.meta.gps) {
+      missing.push_back(cat(it.source.generic_string(), " (",
+                            it.meta.gps_problem.empty() ? "no GPS tags" : it.meta.gps_problem, ")"));
+      continue;
+    }
+    for (int a = 0; a < 3; ++a) sum[it.capture][std::size_t(a)] += (*it.meta.gps)[std::size_t(a)];
+    ++n[it.capture];
+  }
+  std::vector<std::string> lacking;
+  for (std::size_t c = 0; c < captures; ++c)
+    if (n[c] == 0) lacking.push_back(cat("capture ", c + 1));
+  if (!lacking.empty())
+    fail(images, cat("--matching gps needs a GPS position for every capture; ", lacking.size(), " have none: ",
+             list_some(lacking), "; files without one: ", list_some(missing, 4),
+             "\n  (--matching window pairs captures by their order instead)"));
+  std::vector<std::array<double, 3>> pos(captures);
+  for (std::size_t c = 0; c < captures; ++c)
+    for (int a = 0; a < 3; ++a) pos[c][std::size_t(a)] = sum[c][std::size_t(a)] / n[c];
+  const double lat0 = pos[0][0], lon0 = pos[0][1];
+  for (auto& p : pos) p = msgs::io::local_metres(p, lat0, lon0);
+  return pos;
+}
+
 int run_import(const std::vector<std::string>& argv) {
   const msgs::cli::Args args(argv,
                              {"images", "out", "camera", "bands", "eval-every", "camera-model", "radiometry", "matching", "window",
-                              "colmap", "exiv2"},
+                              "neighbours", "colmap", "exiv2"},
                              {"force", "allow-partial", "keep-work", "help"});
   if (args.flag("help")) {
     std::fputs(kUsage, stdout);
@@ -230,10 +268,12 @@ int run_import(const std::vector<std::string>& argv) {
   if (radiometry != "auto" && radiometry != "none")
     throw msgs::cli::UsageError("--radiometry expects auto or none, got '" + radiometry + "'");
   const std::string matching = args.get("matching", "exhaustive");
-  if (matching != "exhaustive" && matching != "window")
-    throw msgs::cli::UsageError("--matching expects exhaustive or window, got '" + matching + "'");
+  if (matching != "exhaustive" && matching != "window" && matching != "gps")
+    throw msgs::cli::UsageError("--matching expects exhaustive, window or gps, got '" + matching + "'");
   const long window = args.integer("window", 6);
   if (window < 1) throw msgs::cli::UsageError("--window expects a positive number of captures");
+  const long neighbours = args.integer("neighbours", 12);
+  if (neighbours < 1) throw msgs::cli::UsageError("--neighbours expects a positive number of captures");
 
   std::error_code ec;
   if (!fs::is_directory(images, ec)) fail(images, "--images folder does not exist or is not a folder");
@@ -319,9 +359,12 @@ int run_import(const std::vector<std::string>& argv) {
   // ---- 2. metadata (exiv2)
   const auto t_meta = Clock::now();
   bool have_meta = false;
-  if (radiometry == "auto") {
+  if (radiometry == "auto" || matching == "gps") {
     const std::string exiv2_arg = args.get("exiv2", "exiv2");
     if (!msgs::cli::find_program(exiv2_arg)) {
+      if (matching == "gps")
+        fail(exiv2_arg, "--matching gps reads the positions with exiv2, which was not found (install it: "
+                        "apt-get install exiv2, or point --exiv2 at it)");
       std::printf("  warning: exiv2 not found (install it: apt-get install exiv2); keeping the stored values "
                   "(no radiometric normalisation)\n");
     } else {
@@ -359,7 +402,7 @@ int run_import(const std::vector<std::string>& argv) {
   for (const auto& [band, idx] : by_band) {
     if (band == "D") continue;
     msgs::io::RadiometrySteps steps;
-    if (have_meta) {
+    if (have_meta && radiometry == "auto") {
       std::vector<msgs::io::CaptureMeta> metas;
       std::vector<fs::path> srcs;
       for (std::size_t i : idx) {
@@ -467,13 +510,21 @@ int run_import(const std::vector<std::string>& argv) {
   } else {
     std::vector<msgs::io::PairImage> pi;
     for (const Item& it : items) pi.push_back({it.capture, it.band});
-    const auto pairs = msgs::io::window_pairs(pi, std::size_t(window));
+    std::vector<std::pair<std::size_t, std::size_t>> pairs;
+    if (matching == "window") {
+      pairs = msgs::io::window_pairs(pi, std::size_t(window));
+      std::printf("  matching a window of %ld captures: %zu of the %zu pairs\n", window, pairs.size(),
+                  msgs::io::exhaustive_pair_count(items.size()));
+    } else {
+      const auto positions = capture_positions(items, scan.captures.size(), images);
+      pairs = msgs::io::neighbour_pairs(pi, positions, std::size_t(neighbours));
+      std::printf("  matching the %ld nearest captures by GPS: %zu of the %zu pairs\n", neighbours, pairs.size(),
+                  msgs::io::exhaustive_pair_count(items.size()));
+    }
     std::string text;
     for (const auto& [i, j] : pairs) text += items[i].colmap_name + " " + items[j].colmap_name + "\n";
     const fs::path list = work / "match_pairs.txt";
     msgs::io::write_text_atomic(list, text);
-    std::printf("  matching a window of %ld captures: %zu of the %zu pairs\n", window, pairs.size(),
-                msgs::io::exhaustive_pair_count(items.size()));
     timings["matching"] = run_colmap(colmap->string(), "matches_importer",
                                      {"--database_path", db, "--match_list_path", list.string(), "--match_type", "pairs",
                                       "--SiftMatching.use_gpu", "0"},
@@ -542,7 +593,9 @@ int run_import(const std::vector<std::string>& argv) {
   meta_json["images"] = items.size();
   meta_json["mean_reprojection_error_px"] = opt_number(reproj);
   meta_json["colmap_camera_model"] = model;
-  meta_json["colmap_matching"] = matching == "window" ? cat("window ", window) : matching;
+  meta_json["colmap_matching"] = matching == "window" ? cat("window ", window)
+                                  : matching == "gps"  ? cat("gps ", neighbours, " nearest")
+                                                       : matching;
   tf["msgs_import"] = meta_json;
   nlohmann::ordered_json frames = nlohmann::ordered_json::array();
   std::vector<std::string> train, eval;

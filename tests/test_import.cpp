@@ -8,11 +8,13 @@
 #include <msgs/io/capture_meta.hpp>
 #include <msgs/io/dataset.hpp>
 #include <msgs/io/image_io.hpp>
+#include <msgs/io/match_pairs.hpp>
 #include <msgs/synth.hpp>
 #include <msgs/synth/raw.hpp>
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -107,6 +109,19 @@ TEST_CASE("synth --raw: deterministic bytes, camera file names, metadata exiv2 r
   CHECK(m.has_vignetting());
   CHECK(*m.bits_per_sample == 16);
   CHECK(m.focal_px().has_value());
+  // The capture's position: the RGB mount's camera centre, metres east/north/up of 51.98 N, 5.66 E, 20 m.
+  REQUIRE(m.gps.has_value());
+  const msgs::synth::SynthScene scene = [&] {
+    msgs::synth::SynthPreset p = msgs::synth::synth_preset(opt.preset);
+    p.captures = opt.captures;
+    return msgs::synth::make_scene(p, opt.seed);
+  }();
+  const auto c = scene.captures[1].cameras[std::size_t(msgs::synth::Band::D)].position();
+  const auto local = msgs::io::local_metres(*m.gps, 51.98, 5.66);
+  // XMP exif keeps a millionth of a minute (1.9 mm of latitude) and a millimetre of altitude.
+  CHECK(std::abs(local[0] - c.x()) < 0.005);
+  CHECK(std::abs(local[1] - c.y()) < 0.005);
+  CHECK(std::abs(local[2] - (20.0 + c.z())) < 0.002);
 }
 
 TEST_CASE("msgs import: junk names and an existing --out are refused, nothing left behind") {
@@ -220,7 +235,7 @@ TEST_CASE("msgs import: synthetic MicaSense captures through exiv2 + COLMAP") {
   }
 }
 
-TEST_CASE("msgs import --matching window: the pairs of a window of captures register the whole set") {
+TEST_CASE("msgs import --matching window and gps: the pairs of nearby captures register the whole set") {
   if (!on_path("colmap")) {
     MESSAGE("SKIPPED: the colmap binary is not on PATH");
     return;
@@ -256,11 +271,41 @@ TEST_CASE("msgs import --matching window: the pairs of a window of captures regi
   // Bad values are refused before any work, naming the option.
   const auto [rc_bad, log_bad] = import("--matching sequential", "bad");
   CHECK(rc_bad != 0);
-  CHECK_MESSAGE(log_bad.find("--matching expects exhaustive or window") != std::string::npos, log_bad);
+  CHECK_MESSAGE(log_bad.find("--matching expects exhaustive, window or gps") != std::string::npos, log_bad);
+  const auto [rc_k0, log_k0] = import("--matching gps --neighbours 0", "bad");
+  CHECK(rc_k0 != 0);
+  CHECK_MESSAGE(log_k0.find("--neighbours expects a positive number") != std::string::npos, log_k0);
   const auto [rc_w0, log_w0] = import("--matching window --window 0", "bad");
   CHECK(rc_w0 != 0);
   CHECK_MESSAGE(log_w0.find("--window expects a positive number") != std::string::npos, log_w0);
   CHECK(!fs::exists(dir / "bad"));
+
+  if (!on_path("exiv2")) {
+    MESSAGE("exiv2 not on PATH: --matching gps not tested (scripts/setup.sh installs it)");
+    return;
+  }
+  // The synthetic captures carry their positions (XMP exif GPS): each capture's two nearest on
+  // the orbit, 58 pairs here as well, register every image.
+  const auto [rc_g, log_g] = import("--matching gps --neighbours 2", "gps");
+  REQUIRE_MESSAGE(rc_g == 0, log_g);
+  CHECK_MESSAGE(log_g.find("matching the 2 nearest captures by GPS: 58 of the 190 pairs") != std::string::npos, log_g);
+  const Json tg = Json::parse(slurp(dir / "gps" / "transforms.json"));
+  CHECK(tg["msgs_import"]["colmap_matching"] == "gps 2 nearest");
+  CHECK(tg["msgs_import"]["registered"] == 20);
+
+  // A capture without a position: an error naming it and its files, the way out, nothing left.
+  for (int band = 1; band <= 5; ++band)
+    REQUIRE(run("exiv2 -q -M'del Xmp.exif.GPSLatitude' '" + (dir / "raw" / ("IMG_0003_" + std::to_string(band) + ".tif")).string() + "'",
+                dir / "exiv2_del.log") == 0);
+  const auto [rc_n, log_n] = import("--matching gps", "nogps");
+  CHECK(rc_n != 0);
+  CHECK_MESSAGE(log_n.find("--matching gps needs a GPS position for every capture; 1 have none: capture 3") !=
+                    std::string::npos,
+                log_n);
+  CHECK_MESSAGE(log_n.find("IMG_0003_2.tif (no GPS tags)") != std::string::npos, log_n);
+  CHECK_MESSAGE(log_n.find("--matching window") != std::string::npos, log_n);
+  CHECK(!fs::exists(dir / "nogps"));
+  CHECK(!leftovers(dir, "nogps"));
 }
 
 TEST_CASE("msgs import: COLMAP failure leaves no output and no temporary folder") {

@@ -4,6 +4,8 @@
 #include <doctest/doctest.h>
 
 #include <algorithm>
+#include <array>
+#include <cmath>
 #include <set>
 #include <string>
 #include <utility>
@@ -80,4 +82,50 @@ TEST_CASE("window_pairs: a long flight has pairs in proportion to its images, no
   CHECK(msgs::io::exhaustive_pair_count(1) == 0);
   CHECK(window_pairs({}, 6).empty());
   CHECK(window_pairs({{0, "D"}}, 6).empty());
+}
+
+TEST_CASE("neighbour_pairs: the nearest captures on the ground, whatever their order in the files") {
+  // A survey grid flown as a lawnmower: line 1 east (captures 0-3), line 2 back west (4-7), 30 m
+  // apart, 10 m between captures. Capture 7 sits next to capture 0, three files away in no window.
+  std::vector<std::array<double, 3>> pos;
+  for (int i = 0; i < 4; ++i) pos.push_back({10.0 * i, 0.0, 50.0});
+  for (int i = 3; i >= 0; --i) pos.push_back({10.0 * i, 30.0, 50.0});
+  const auto images = flight(8, {"D"});
+  // Two nearest: the neighbours on the line (10 m) first; at the ends of a line the next nearest
+  // is the capture across (30 m) or two along (20 m): 20 m wins.
+  const Pairs p2 = msgs::io::neighbour_pairs(images, pos, 2);
+  const std::set<std::pair<std::size_t, std::size_t>> s2(p2.begin(), p2.end());
+  CHECK(s2.count({0, 1}));
+  CHECK(s2.count({0, 2}));
+  CHECK(!s2.count({0, 7}));
+  // Three nearest: capture 0's third is a tie at 30 m between 3 (along) and 7 (across); the lower
+  // index wins. Capture 1's three are 0, 2 (10 m) and 3 (20 m), not 6 across (30 m).
+  const Pairs p3 = msgs::io::neighbour_pairs(images, pos, 3);
+  const std::set<std::pair<std::size_t, std::size_t>> s3(p3.begin(), p3.end());
+  CHECK(s3.count({0, 3}));
+  CHECK(!s3.count({1, 6}));
+  // Four nearest reach across the grid everywhere: every capture is paired with the one facing it.
+  const Pairs p4 = msgs::io::neighbour_pairs(images, pos, 4);
+  const std::set<std::pair<std::size_t, std::size_t>> s4(p4.begin(), p4.end());
+  for (std::size_t i = 0; i < 4; ++i) CHECK_MESSAGE(s4.count({i, 7 - i}), i);
+  // Pairs are ascending and unique, and k past the flight is every pair.
+  CHECK(std::is_sorted(p4.begin(), p4.end()));
+  CHECK(s4.size() == p4.size());
+  CHECK(msgs::io::neighbour_pairs(images, pos, 100).size() == msgs::io::exhaustive_pair_count(8));
+  // With several bands: within a capture every pair, across linked captures the same band only.
+  const auto two = flight(8, {"D", "MS_NIR"});
+  const Pairs b = msgs::io::neighbour_pairs(two, pos, 2);
+  for (const auto& [i, j] : b) CHECK((two[i].capture == two[j].capture || two[i].band == two[j].band));
+  CHECK(b.size() == 8 + 2 * p2.size());
+}
+
+TEST_CASE("local_metres: degrees to metres east, north and up") {
+  const auto o = msgs::io::local_metres({51.98, 5.66, 20.0}, 51.98, 5.66);
+  CHECK(o[0] == 0.0);
+  CHECK(o[1] == 0.0);
+  CHECK(o[2] == 20.0);
+  const auto n = msgs::io::local_metres({51.981, 5.66, 20.0}, 51.98, 5.66);
+  CHECK(n[1] == doctest::Approx(111.195).epsilon(1e-4));  // a thousandth of a degree of latitude
+  const auto e = msgs::io::local_metres({51.98, 5.661, 20.0}, 51.98, 5.66);
+  CHECK(e[0] == doctest::Approx(111.195 * std::cos(51.98 * 3.14159265358979323846 / 180.0)).epsilon(1e-4));
 }

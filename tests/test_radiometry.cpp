@@ -76,6 +76,88 @@ TEST_CASE("capture meta: real EXIF keys, DJI keys, units and precedence") {
   CHECK(!d.exposure_s);
 }
 
+TEST_CASE("capture meta: GPS positions in EXIF, DJI XMP and XMP exif forms") {
+  // EXIF: degrees, minutes, seconds as rationals with reference letters; altitude ref 1 = below sea level.
+  const CaptureMeta e = parse_capture_meta(
+      "Exif.GPSInfo.GPSLatitudeRef                   S\n"
+      "Exif.GPSInfo.GPSLatitude                      33/1 51/1 5400/100\n"
+      "Exif.GPSInfo.GPSLongitudeRef                  E\n"
+      "Exif.GPSInfo.GPSLongitude                     151/1 12/1 3600/100\n"
+      "Exif.GPSInfo.GPSAltitudeRef                   1\n"
+      "Exif.GPSInfo.GPSAltitude                      1250/100\n",
+      "a.tif");
+  REQUIRE(e.gps);
+  CHECK((*e.gps)[0] == doctest::Approx(-(33 + 51 / 60.0 + 54 / 3600.0)));
+  CHECK((*e.gps)[1] == doctest::Approx(151 + 12 / 60.0 + 36 / 3600.0));
+  CHECK((*e.gps)[2] == doctest::Approx(-12.5));
+  CHECK(e.source.at("gps") == "Exif.GPSInfo.GPSLatitude");
+
+  // DJI: signed decimal degrees, some firmware's "GpsLongtitude", absolute altitude with a sign.
+  const CaptureMeta d = parse_capture_meta(
+      "Xmp.drone-dji.GpsLatitude                     +51.98001142\n"
+      "Xmp.drone-dji.GpsLongtitude                   -0.1234\n"
+      "Xmp.drone-dji.AbsoluteAltitude                +34.77\n",
+      "DJI_x_MS_G.TIF");
+  REQUIRE(d.gps);
+  CHECK((*d.gps)[0] == doctest::Approx(51.98001142));
+  CHECK((*d.gps)[1] == doctest::Approx(-0.1234));
+  CHECK((*d.gps)[2] == doctest::Approx(34.77));
+
+  // XMP exif: "DDD,MM.mmmK" or "DDD,MM,SSK"; no altitude is 0.
+  const CaptureMeta x = parse_capture_meta(
+      "Xmp.exif.GPSLatitude                          51,58.803168N\n"
+      "Xmp.exif.GPSLongitude                         5,39,36W\n",
+      "IMG_0001_2.tif");
+  REQUIRE(x.gps);
+  CHECK((*x.gps)[0] == doctest::Approx(51 + 58.803168 / 60.0));
+  CHECK((*x.gps)[1] == doctest::Approx(-(5 + 39 / 60.0 + 36 / 3600.0)));
+  CHECK((*x.gps)[2] == 0.0);
+
+  // EXIF wins over XMP; no position at all leaves it unset without a problem.
+  const CaptureMeta both = parse_capture_meta(
+      "Exif.GPSInfo.GPSLatitudeRef N\nExif.GPSInfo.GPSLatitude 10/1 0/1 0/1\n"
+      "Exif.GPSInfo.GPSLongitudeRef E\nExif.GPSInfo.GPSLongitude 20/1 0/1 0/1\n"
+      "Xmp.drone-dji.GpsLatitude 1\nXmp.drone-dji.GpsLongitude 2\n",
+      "b.tif");
+  REQUIRE(both.gps);
+  CHECK((*both.gps)[0] == 10.0);
+  const CaptureMeta none = parse_capture_meta(kMicaSense, "IMG_0001_2.tif");
+  CHECK(!none.gps);
+  CHECK(none.gps_problem.empty());
+}
+
+TEST_CASE("capture meta: a malformed GPS position is no error, but says what was wrong") {
+  // A position is optional (only --matching gps needs it): unreadable values leave it unset and
+  // name the key, instead of stopping an import that does not use it.
+  const char* bad[] = {
+      "Exif.GPSInfo.GPSLatitudeRef N\nExif.GPSInfo.GPSLatitude 10/1 0/0 0/1\n"
+      "Exif.GPSInfo.GPSLongitudeRef E\nExif.GPSInfo.GPSLongitude 20/1 0/1 0/1\n",  // division by zero
+      "Exif.GPSInfo.GPSLatitudeRef X\nExif.GPSInfo.GPSLatitude 10/1 0/1 0/1\n"
+      "Exif.GPSInfo.GPSLongitudeRef E\nExif.GPSInfo.GPSLongitude 20/1 0/1 0/1\n",  // no such reference
+      "Exif.GPSInfo.GPSLatitude 10/1 0/1 0/1\n"
+      "Exif.GPSInfo.GPSLongitudeRef E\nExif.GPSInfo.GPSLongitude 20/1 0/1 0/1\n",  // reference missing
+      "Exif.GPSInfo.GPSLatitudeRef N\nExif.GPSInfo.GPSLatitude 10/1 75/1 0/1\n"
+      "Exif.GPSInfo.GPSLongitudeRef E\nExif.GPSInfo.GPSLongitude 20/1 0/1 0/1\n",  // 75 minutes
+      "Xmp.drone-dji.GpsLatitude 95.0\nXmp.drone-dji.GpsLongitude 2\n",          // beyond the pole
+      "Xmp.drone-dji.GpsLatitude nan\nXmp.drone-dji.GpsLongitude 2\n",
+      "Xmp.drone-dji.GpsLatitude 1\nXmp.drone-dji.GpsLongitude 200\n",
+      "Xmp.exif.GPSLatitude 51,58.8Q\nXmp.exif.GPSLongitude 5,39.6E\n",
+      "Xmp.exif.GPSLatitude 51,58.8N\nXmp.exif.GPSLongitude 5,39.6E\nXmp.exif.GPSAltitude 12/0\n",
+  };
+  for (const char* text : bad) {
+    CaptureMeta m;
+    REQUIRE_NOTHROW(m = parse_capture_meta(text, "x.tif"));
+    CHECK_MESSAGE(!m.gps, text);
+    CHECK_MESSAGE(m.gps_problem.find("is not a position") != std::string::npos, text);
+    const std::string& why = m.gps_problem;  // names the key
+    CHECK_MESSAGE((why.find("Latitude") != std::string::npos || why.find("Longitude") != std::string::npos ||
+                   why.find("Altitude") != std::string::npos),
+                  why);
+  }
+  const CaptureMeta lon = parse_capture_meta("Xmp.drone-dji.GpsLatitude 1\nXmp.drone-dji.GpsLongitude 200\n", "x.tif");
+  CHECK(lon.gps_problem.rfind("Xmp.drone-dji.GpsLongitude '200'", 0) == 0);
+}
+
 TEST_CASE("capture meta: several files in one exiv2 output, junk lines ignored") {
   const std::vector<std::string> files = {"/d/a b.tif", "/d/a b.tif.2", "/d/c.tif"};
   const std::string text =

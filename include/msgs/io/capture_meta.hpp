@@ -56,6 +56,11 @@ struct CaptureMeta {
   std::optional<double> focal_length_mm;
   std::optional<double> focal_plane_px_per_mm;  ///< x resolution, converted to pixels per mm
   std::optional<int> bits_per_sample;
+  /// Where the camera was: latitude and longitude in degrees (north and east positive) and
+  /// altitude in metres (0 when the file gives none). Unset when the file has no position or an
+  /// unreadable one (`gps_problem` then says which key and value).
+  std::optional<std::array<double, 3>> gps;
+  std::string gps_problem;
   std::map<std::string, std::string> source;    ///< quantity -> exiv2 key it was read from
 
   /// Focal length in pixels (focal length x focal-plane resolution), when both are known.
@@ -75,7 +80,12 @@ inline const std::vector<std::string>& exiv2_metadata_keys() {
       "Xmp.Camera.VignettingPolynomial", "Xmp.Camera.VignettingCenter", "Xmp.drone-dji.VignettingData",
       "Xmp.drone-dji.CalibratedOpticalCenterX", "Xmp.drone-dji.CalibratedOpticalCenterY", "Exif.Photo.FocalLength",
       "Xmp.exif.FocalLength", "Exif.Photo.FocalPlaneXResolution", "Exif.Photo.FocalPlaneResolutionUnit",
-      "Xmp.exif.FocalPlaneXResolution", "Xmp.exif.FocalPlaneResolutionUnit", "Exif.Image.BitsPerSample"};
+      "Xmp.exif.FocalPlaneXResolution", "Xmp.exif.FocalPlaneResolutionUnit", "Exif.Image.BitsPerSample",
+      "Exif.GPSInfo.GPSLatitude", "Exif.GPSInfo.GPSLatitudeRef", "Exif.GPSInfo.GPSLongitude",
+      "Exif.GPSInfo.GPSLongitudeRef", "Exif.GPSInfo.GPSAltitude", "Exif.GPSInfo.GPSAltitudeRef",
+      "Xmp.drone-dji.GpsLatitude", "Xmp.drone-dji.GpsLongitude", "Xmp.drone-dji.GpsLongtitude",
+      "Xmp.drone-dji.AbsoluteAltitude", "Xmp.exif.GPSLatitude", "Xmp.exif.GPSLongitude", "Xmp.exif.GPSAltitude",
+      "Xmp.exif.GPSAltitudeRef"};
   return keys;
 }
 
@@ -141,6 +151,38 @@ inline std::optional<std::vector<double>> parse_number_list(std::string_view s, 
   return out;
 }
 
+/// An EXIF GPS coordinate, "d/1 m/1 s/100" (degrees, minutes, seconds as rationals), with its
+/// reference letter ("N", "S", "E", "W"): signed degrees, or nullopt when malformed.
+inline std::optional<double> parse_exif_coordinate(std::string_view dms, std::string_view ref, char positive,
+                                                   char negative) {
+  const auto v = parse_number_list(dms, 3);
+  ref = trim(ref);
+  if (!v || v->size() != 3 || ref.size() != 1 || (ref[0] != positive && ref[0] != negative)) return std::nullopt;
+  if ((*v)[0] < 0 || (*v)[1] < 0 || (*v)[1] >= 60 || (*v)[2] < 0 || (*v)[2] >= 60) return std::nullopt;
+  const double deg = (*v)[0] + (*v)[1] / 60.0 + (*v)[2] / 3600.0;
+  return ref[0] == negative ? -deg : deg;
+}
+
+/// An XMP GPS coordinate, "DDD,MM.mmmK" or "DDD,MM,SSK" with K one of the two reference letters:
+/// signed degrees, or nullopt when malformed.
+inline std::optional<double> parse_xmp_coordinate(std::string_view s, char positive, char negative) {
+  s = trim(s);
+  if (s.size() < 4) return std::nullopt;
+  const char ref = s.back();
+  if (ref != positive && ref != negative) return std::nullopt;
+  std::string body(s.substr(0, s.size() - 1));
+  for (char& c : body)
+    if (c == ',') c = ' ';
+  const auto v = parse_number_list(body, 3);
+  if (!v || v->size() < 2 || (*v)[0] < 0 || (*v)[1] < 0 || (*v)[1] >= 60) return std::nullopt;
+  double deg = (*v)[0] + (*v)[1] / 60.0;
+  if (v->size() == 3) {
+    if ((*v)[1] != std::floor((*v)[1]) || (*v)[2] < 0 || (*v)[2] >= 60) return std::nullopt;
+    deg += (*v)[2] / 3600.0;
+  }
+  return ref == negative ? -deg : deg;
+}
+
 }  // namespace detail
 
 /// Parse exiv2's `-P kv` output for ONE file ("KEY<spaces>VALUE" per line) into key -> value.
@@ -188,6 +230,67 @@ inline std::vector<std::string> split_exiv2_output(std::string_view text, const 
     out[best].push_back('\n');
   }
   return out;
+}
+
+/// The camera position of one file's key -> value map into m.gps, from the EXIF GPS tags, else
+/// DJI's XMP (decimal degrees; some firmware spells GpsLongtitude), else XMP exif (DDD,MM.mmmK).
+/// A position is optional, so a malformed one is no error here: m.gps stays unset and
+/// m.gps_problem names the key and value (an import that needs positions reports it).
+inline void read_gps(const std::map<std::string, std::string>& kv, CaptureMeta& m) {
+  const auto get = [&](const char* k) -> const std::string* {
+    const auto it = kv.find(k);
+    return it == kv.end() ? nullptr : &it->second;
+  };
+  const auto problem = [&](const char* key) {
+    m.gps_problem = cat(key, " '", get(key) ? get(key)->substr(0, 60) : std::string(), "' is not a position");
+  };
+  std::optional<double> lat, lon, alt;
+  const char *lat_key = nullptr, *lon_key = nullptr;
+  if (get("Exif.GPSInfo.GPSLatitude") && get("Exif.GPSInfo.GPSLongitude")) {
+    lat_key = "Exif.GPSInfo.GPSLatitude";
+    lon_key = "Exif.GPSInfo.GPSLongitude";
+    const std::string none;
+    const std::string* lr = get("Exif.GPSInfo.GPSLatitudeRef");
+    const std::string* gr = get("Exif.GPSInfo.GPSLongitudeRef");
+    lat = detail::parse_exif_coordinate(*get("Exif.GPSInfo.GPSLatitude"), lr ? *lr : none, 'N', 'S');
+    lon = detail::parse_exif_coordinate(*get("Exif.GPSInfo.GPSLongitude"), gr ? *gr : none, 'E', 'W');
+    if (!lat) return problem(lat_key);
+    if (!lon) return problem(lon_key);
+    if (const std::string* a = get("Exif.GPSInfo.GPSAltitude")) {
+      alt = detail::parse_number(*a);
+      if (!alt) return problem("Exif.GPSInfo.GPSAltitude");
+      if (const std::string* r = get("Exif.GPSInfo.GPSAltitudeRef"); r && detail::trim(*r) == "1") alt = -*alt;
+    }
+  } else if (get("Xmp.drone-dji.GpsLatitude") && (get("Xmp.drone-dji.GpsLongitude") || get("Xmp.drone-dji.GpsLongtitude"))) {
+    lat_key = "Xmp.drone-dji.GpsLatitude";
+    lon_key = get("Xmp.drone-dji.GpsLongitude") ? "Xmp.drone-dji.GpsLongitude" : "Xmp.drone-dji.GpsLongtitude";
+    lat = detail::parse_number(*get(lat_key));
+    lon = detail::parse_number(*get(lon_key));
+    if (!lat) return problem(lat_key);
+    if (!lon) return problem(lon_key);
+    if (const std::string* a = get("Xmp.drone-dji.AbsoluteAltitude")) {
+      alt = detail::parse_number(*a);
+      if (!alt) return problem("Xmp.drone-dji.AbsoluteAltitude");
+    }
+  } else if (get("Xmp.exif.GPSLatitude") && get("Xmp.exif.GPSLongitude")) {
+    lat_key = "Xmp.exif.GPSLatitude";
+    lon_key = "Xmp.exif.GPSLongitude";
+    lat = detail::parse_xmp_coordinate(*get("Xmp.exif.GPSLatitude"), 'N', 'S');
+    lon = detail::parse_xmp_coordinate(*get("Xmp.exif.GPSLongitude"), 'E', 'W');
+    if (!lat) return problem(lat_key);
+    if (!lon) return problem(lon_key);
+    if (const std::string* a = get("Xmp.exif.GPSAltitude")) {
+      alt = detail::parse_number(*a);
+      if (!alt) return problem("Xmp.exif.GPSAltitude");
+      if (const std::string* r = get("Xmp.exif.GPSAltitudeRef"); r && detail::trim(*r) == "1") alt = -*alt;
+    }
+  } else {
+    return;  // no position
+  }
+  if (!(std::abs(*lat) <= 90.0)) return problem(lat_key);
+  if (!(std::abs(*lon) <= 180.0)) return problem(lon_key);
+  m.gps = std::array<double, 3>{*lat, *lon, alt.value_or(0.0)};
+  m.source["gps"] = lat_key;
 }
 
 /// Turn the key -> value map of one file into metadata. `file` names the image in errors.
@@ -290,6 +393,7 @@ inline CaptureMeta capture_meta_from_exiv2(const std::map<std::string, std::stri
     m.bits_per_sample = int(b);
     m.source["bits_per_sample"] = e->first;
   }
+  read_gps(kv, m);
   return m;
 }
 

@@ -23,6 +23,9 @@
 //              camera: no black level (DN = radiance x ...) and no MicaSense-style vignetting tags
 //              (the real one writes a 2-D polynomial msgs does not read), so the images carry no
 //              vignetting either; exposure, ISO, wavelengths and focal data as for MicaSense.
+//   All three carry the capture's position (the RGB mount's centre as metres east, north and up
+//   of 51.98 N, 5.66 E, 20 m): DJI as drone-dji:GpsLatitude/GpsLongitude/AbsoluteAltitude, the
+//   others as exif:GPSLatitude/GPSLongitude ("DD,MM.mmmmmmK") and exif:GPSAltitude.
 //
 // Exposure time and ISO vary per capture and band (an auto-exposing camera), seeded: the same
 // seed gives the same bytes.
@@ -161,6 +164,32 @@ inline std::string rdf_seq(const std::vector<double>& v) {
   return s + "</rdf:Seq>";
 }
 
+/// The camera position `p` (metres east, north, up of the scene's origin) as GPS tags in the
+/// camera's style: DJI's decimal degrees and absolute altitude, otherwise XMP exif "DD,MM.mmmmmmK"
+/// with the altitude as a rational. The origin is placed at 51.98 N, 5.66 E, 20 m above sea level.
+inline void add_gps(const std::string& camera, const Vec3f& p, std::vector<std::pair<std::string, std::string>>& attrs) {
+  constexpr double kEarthRadius = 6371008.8, kDeg = 180.0 / 3.14159265358979323846, lat0 = 51.98, lon0 = 5.66;
+  const double lat = lat0 + double(p.y()) / kEarthRadius * kDeg;
+  const double lon = lon0 + double(p.x()) / (kEarthRadius * std::cos(lat0 / kDeg)) * kDeg;
+  const double alt = 20.0 + double(p.z());
+  if (camera == "dji") {
+    attrs.emplace_back("drone-dji:GpsLatitude", g10(lat));
+    attrs.emplace_back("drone-dji:GpsLongitude", g10(lon));
+    attrs.emplace_back("drone-dji:AbsoluteAltitude", g10(alt));
+    return;
+  }
+  const auto dm = [](double deg, char pos, char neg) {
+    const double a = std::abs(deg), d = std::floor(a);
+    char buf[48];
+    std::snprintf(buf, sizeof buf, "%d,%.6f%c", int(d), (a - d) * 60.0, deg < 0 ? neg : pos);
+    return std::string(buf);
+  };
+  attrs.emplace_back("exif:GPSLatitude", dm(lat, 'N', 'S'));
+  attrs.emplace_back("exif:GPSLongitude", dm(lon, 'E', 'W'));
+  attrs.emplace_back("exif:GPSAltitude", io::cat(std::lround(std::abs(alt) * 1000.0), "/1000"));
+  attrs.emplace_back("exif:GPSAltitudeRef", alt < 0 ? "1" : "0");
+}
+
 /// XMP packet: simple properties as attributes, sequences as elements.
 inline std::string xmp_packet(const std::vector<std::pair<std::string, std::string>>& attrs,
                               const std::vector<std::pair<std::string, std::string>>& elems) {
@@ -296,6 +325,7 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
           {"exif:FocalPlaneXResolution", detail::g10(px_per_mm)},
           {"exif:FocalPlaneYResolution", detail::g10(px_per_mm)},
           {"exif:FocalPlaneResolutionUnit", "4"}};
+      detail::add_gps(opt.camera, cap.cameras[static_cast<std::size_t>(Band::D)].position(), attrs);
       std::vector<std::pair<std::string, std::string>> elems;
       if (b.rgb) {
         const Image<float> img = render_band(scene, cam, Band::D, rs);
