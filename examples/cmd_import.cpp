@@ -496,15 +496,16 @@ int run_import(const std::vector<std::string>& argv) {
     t_features += run_colmap(colmap->string(), "feature_extractor", a, log);
   }
   timings["features"] = t_features;
-  // Every pair by default: the window (msgs/io/match_pairs.hpp) misses the views a path comes
-  // back to, which a walk around a building or the next line of a survey grid does.
+  // Every pair by default: it needs no positions, and a window (msgs/io/match_pairs.hpp) misses
+  // the views a path comes back to, as a walk around a building or the next line of a survey grid
+  // does.
   if (matching == "exhaustive") {
     const std::size_t n_pairs = msgs::io::exhaustive_pair_count(items.size());
     std::printf("  matching every pair: %zu\n", n_pairs);
     // About 0.03 s (320x240) to 0.4 s (1024x768) a pair on two cores: beyond 20k pairs, hours.
     if (n_pairs > 20000)
-      std::printf("  note: that many pairs take hours; --matching window matches only the captures near each "
-                  "other in flight order\n");
+      std::printf("  note: that many pairs take hours; --matching gps (by the positions in the metadata) or window "
+                  "(by the order of the files) matches only nearby captures\n");
     timings["matching"] = run_colmap(colmap->string(), "exhaustive_matcher",
                                      {"--database_path", db, "--SiftMatching.use_gpu", "0"}, log);
   } else {

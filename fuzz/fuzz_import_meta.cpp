@@ -1,13 +1,16 @@
 // fuzz/fuzz_import_meta.cpp
 // libFuzzer target for the pure parts of `msgs import`: exiv2 output parsing
-// (io::parse_capture_meta, io::split_exiv2_output), --bands pattern parsing and file-name
+// (io::parse_capture_meta with GPS positions and the pairs formed from them, io::split_exiv2_output), --bands pattern parsing and file-name
 // recognition (io::parse_band_patterns, io::scan_capture_names with every camera scheme).
 //
 // Input: exiv2 text, then optionally a NUL byte, a --bands spec line and file names one per line.
 // Acceptable outcomes: success, io::IoError, and std::invalid_argument from parse_band_patterns
 // (a usage error). Anything else aborts.
 #include <algorithm>
+#include <cmath>
 #include <cstddef>
+#include <cstdio>
+#include <cstdlib>
 #include <cstdint>
 #include <filesystem>
 #include <stdexcept>
@@ -17,6 +20,7 @@
 #include "fuzz_common.hpp"
 #include "msgs/io/capture_meta.hpp"
 #include "msgs/io/capture_names.hpp"
+#include "msgs/io/match_pairs.hpp"
 #include "msgs/io/radiometry.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
@@ -41,6 +45,17 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     io::FrameRadiometry r = io::frame_radiometry(m, plan.steps, 65535.0);
     io::check_radiometry(r, 8, 6, "fuzz.tif");
     (void)io::relative_radiance(1000.0, 3.0, 2.0, r);
+    // A position that was read is a finite place on the Earth, and pairs can be formed from it.
+    if (m.gps) {
+      const auto local = io::local_metres(*m.gps, 0.0, 0.0);
+      for (double v : local)
+        if (!std::isfinite(v)) {
+          std::fprintf(stderr, "parse_capture_meta: a GPS position that is not finite\n");
+          std::abort();
+        }
+      const std::vector<io::PairImage> images = {{0, "D"}, {1, "D"}};
+      (void)io::neighbour_pairs(images, {local, io::local_metres(*m.gps, 1.0, 1.0)}, 1);
+    }
   });
   std::vector<std::string> names(lines.begin() + (lines.empty() ? 0 : 1), lines.end());
   fuzz::expect_io_error_only("split_exiv2_output", [&] {

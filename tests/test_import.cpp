@@ -61,6 +61,26 @@ bool leftovers(const fs::path& dir, const std::string& name) {
   return false;
 }
 
+/// An empty scratch folder for one test case.
+fs::path fresh_dir(const std::string& name) {
+  const fs::path dir = msgs::testing::scratch_dir("import") / name;
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir;
+}
+
+/// The smallest MicaSense-style set found to register reliably: 160 x 120 px (128 px and below:
+/// no initial pair), 4+ captures; here 5.
+msgs::synth::RawOptions small_micasense_set() {
+  msgs::synth::RawOptions opt;
+  opt.camera = "micasense";
+  opt.preset = "small";
+  opt.captures = 5;
+  opt.width = 160;
+  opt.seed = 3;
+  return opt;
+}
+
 double median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
   return v.empty() ? 0.0 : v[v.size() / 2];
@@ -147,16 +167,8 @@ TEST_CASE("msgs import: synthetic MicaSense captures through exiv2 + COLMAP") {
     MESSAGE("SKIPPED: the colmap binary is not on PATH (scripts/setup.sh installs it); import end to end not tested");
     return;
   }
-  const fs::path dir = msgs::testing::scratch_dir("import") / "e2e";
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  // Smallest set found to register reliably: 160 x 120 px (128 px and below: no initial pair), 4+ captures.
-  msgs::synth::RawOptions opt;
-  opt.camera = "micasense";
-  opt.preset = "small";
-  opt.captures = 5;
-  opt.width = 160;
-  opt.seed = 3;
+  const fs::path dir = fresh_dir("e2e");
+  const msgs::synth::RawOptions opt = small_micasense_set();
   msgs::synth::write_synthetic_raw(dir / "raw", opt);
 
   const auto t0 = std::chrono::steady_clock::now();
@@ -240,16 +252,8 @@ TEST_CASE("msgs import --matching window and gps: the pairs of nearby captures r
     MESSAGE("SKIPPED: the colmap binary is not on PATH");
     return;
   }
-  const fs::path dir = msgs::testing::scratch_dir("import") / "window";
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  msgs::synth::RawOptions opt;  // the set of the end-to-end case above
-  opt.camera = "micasense";
-  opt.preset = "small";
-  opt.captures = 5;
-  opt.width = 160;
-  opt.seed = 3;
-  msgs::synth::write_synthetic_raw(dir / "raw", opt);
+  const fs::path dir = fresh_dir("window");
+  msgs::synth::write_synthetic_raw(dir / "raw", small_micasense_set());
   const auto import = [&](const std::string& flags, const std::string& out) {
     const int rc = run(std::string(MSGS_BIN) + " import --images '" + (dir / "raw").string() + "' --out '" +
                            (dir / out).string() + "' --radiometry none " + flags,
@@ -313,9 +317,7 @@ TEST_CASE("msgs import: COLMAP failure leaves no output and no temporary folder"
     MESSAGE("SKIPPED: the colmap binary is not on PATH");
     return;
   }
-  const fs::path dir = msgs::testing::scratch_dir("import") / "fail";
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = fresh_dir("fail");
   msgs::synth::RawOptions opt;
   opt.camera = "dji";
   opt.captures = 2;

@@ -245,50 +245,39 @@ inline void read_gps(const std::map<std::string, std::string>& kv, CaptureMeta& 
     m.gps_problem = cat(key, " '", get(key) ? get(key)->substr(0, 60) : std::string(), "' is not a position");
   };
   std::optional<double> lat, lon, alt;
-  const char *lat_key = nullptr, *lon_key = nullptr;
+  const char *lat_key = nullptr, *lon_key = nullptr, *alt_key = nullptr, *alt_ref_key = nullptr;
+  const std::string none;
+  const auto value = [&](const char* k) -> const std::string& { return get(k) ? *get(k) : none; };
   if (get("Exif.GPSInfo.GPSLatitude") && get("Exif.GPSInfo.GPSLongitude")) {
     lat_key = "Exif.GPSInfo.GPSLatitude";
     lon_key = "Exif.GPSInfo.GPSLongitude";
-    const std::string none;
-    const std::string* lr = get("Exif.GPSInfo.GPSLatitudeRef");
-    const std::string* gr = get("Exif.GPSInfo.GPSLongitudeRef");
-    lat = detail::parse_exif_coordinate(*get("Exif.GPSInfo.GPSLatitude"), lr ? *lr : none, 'N', 'S');
-    lon = detail::parse_exif_coordinate(*get("Exif.GPSInfo.GPSLongitude"), gr ? *gr : none, 'E', 'W');
-    if (!lat) return problem(lat_key);
-    if (!lon) return problem(lon_key);
-    if (const std::string* a = get("Exif.GPSInfo.GPSAltitude")) {
-      alt = detail::parse_number(*a);
-      if (!alt) return problem("Exif.GPSInfo.GPSAltitude");
-      if (const std::string* r = get("Exif.GPSInfo.GPSAltitudeRef"); r && detail::trim(*r) == "1") alt = -*alt;
-    }
+    alt_key = "Exif.GPSInfo.GPSAltitude";
+    alt_ref_key = "Exif.GPSInfo.GPSAltitudeRef";
+    lat = detail::parse_exif_coordinate(value(lat_key), value("Exif.GPSInfo.GPSLatitudeRef"), 'N', 'S');
+    lon = detail::parse_exif_coordinate(value(lon_key), value("Exif.GPSInfo.GPSLongitudeRef"), 'E', 'W');
   } else if (get("Xmp.drone-dji.GpsLatitude") && (get("Xmp.drone-dji.GpsLongitude") || get("Xmp.drone-dji.GpsLongtitude"))) {
     lat_key = "Xmp.drone-dji.GpsLatitude";
     lon_key = get("Xmp.drone-dji.GpsLongitude") ? "Xmp.drone-dji.GpsLongitude" : "Xmp.drone-dji.GpsLongtitude";
-    lat = detail::parse_number(*get(lat_key));
-    lon = detail::parse_number(*get(lon_key));
-    if (!lat) return problem(lat_key);
-    if (!lon) return problem(lon_key);
-    if (const std::string* a = get("Xmp.drone-dji.AbsoluteAltitude")) {
-      alt = detail::parse_number(*a);
-      if (!alt) return problem("Xmp.drone-dji.AbsoluteAltitude");
-    }
+    alt_key = "Xmp.drone-dji.AbsoluteAltitude";
+    lat = detail::parse_number(value(lat_key));
+    lon = detail::parse_number(value(lon_key));
   } else if (get("Xmp.exif.GPSLatitude") && get("Xmp.exif.GPSLongitude")) {
     lat_key = "Xmp.exif.GPSLatitude";
     lon_key = "Xmp.exif.GPSLongitude";
-    lat = detail::parse_xmp_coordinate(*get("Xmp.exif.GPSLatitude"), 'N', 'S');
-    lon = detail::parse_xmp_coordinate(*get("Xmp.exif.GPSLongitude"), 'E', 'W');
-    if (!lat) return problem(lat_key);
-    if (!lon) return problem(lon_key);
-    if (const std::string* a = get("Xmp.exif.GPSAltitude")) {
-      alt = detail::parse_number(*a);
-      if (!alt) return problem("Xmp.exif.GPSAltitude");
-      if (const std::string* r = get("Xmp.exif.GPSAltitudeRef"); r && detail::trim(*r) == "1") alt = -*alt;
-    }
+    alt_key = "Xmp.exif.GPSAltitude";
+    alt_ref_key = "Xmp.exif.GPSAltitudeRef";
+    lat = detail::parse_xmp_coordinate(value(lat_key), 'N', 'S');
+    lon = detail::parse_xmp_coordinate(value(lon_key), 'E', 'W');
   } else {
     return;  // no position
   }
-  if (!(std::abs(*lat) <= 90.0)) return problem(lat_key);
-  if (!(std::abs(*lon) <= 180.0)) return problem(lon_key);
+  if (!lat || !(std::abs(*lat) <= 90.0)) return problem(lat_key);
+  if (!lon || !(std::abs(*lon) <= 180.0)) return problem(lon_key);
+  if (get(alt_key)) {  // the altitude, optional; a reference of 1 means below sea level
+    alt = detail::parse_number(value(alt_key));
+    if (!alt) return problem(alt_key);
+    if (alt_ref_key && detail::trim(value(alt_ref_key)) == "1") alt = -*alt;
+  }
   m.gps = std::array<double, 3>{*lat, *lon, alt.value_or(0.0)};
   m.source["gps"] = lat_key;
 }
