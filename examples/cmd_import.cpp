@@ -76,7 +76,7 @@ constexpr const char* kUsage =
     "  --camera-model M    COLMAP camera model: OPENCV (default), PINHOLE, SIMPLE_RADIAL, RADIAL\n"
     "  --radiometry R      auto (default: use the metadata) or none (keep the stored values)\n"
     "  --matching M        image pairs COLMAP matches: exhaustive (default: every pair; the time\n"
-    "                      grows with the square of the image count) or window (the bands of a\n"
+    "                      grows with the square of the image count), window (the bands of a\n"
     "                      capture with each other, and each band with the same band of the next\n"
     "                      --window captures in file-name order: for long flights whose captures\n"
     "                      are numbered along the path; views that come back later are not matched)\n"
