@@ -119,7 +119,7 @@ TEST_CASE("neighbour_pairs: the nearest captures on the ground, whatever their o
   CHECK(b.size() == 8 + 2 * p2.size());
 }
 
-TEST_CASE("local_metres: degrees to metres east, north and up") {
+TEST_CASE("local_metres and local_to_gps: degrees to metres east, north and up, and back") {
   const auto o = msgs::io::local_metres({51.98, 5.66, 20.0}, 51.98, 5.66);
   CHECK(o[0] == 0.0);
   CHECK(o[1] == 0.0);
@@ -128,4 +128,8 @@ TEST_CASE("local_metres: degrees to metres east, north and up") {
   CHECK(n[1] == doctest::Approx(111.195).epsilon(1e-4));  // a thousandth of a degree of latitude
   const auto e = msgs::io::local_metres({51.98, 5.661, 20.0}, 51.98, 5.66);
   CHECK(e[0] == doctest::Approx(111.195 * std::cos(51.98 * 3.14159265358979323846 / 180.0)).epsilon(1e-4));
+  // local_to_gps takes it back.
+  const std::array<double, 3> enu = {-1234.5, 678.25, 42.0};
+  const auto back = msgs::io::local_metres(msgs::io::local_to_gps(enu, -33.9, 151.2), -33.9, 151.2);
+  for (int i = 0; i < 3; ++i) CHECK(back[std::size_t(i)] == doctest::Approx(enu[std::size_t(i)]).epsilon(1e-9));
 }

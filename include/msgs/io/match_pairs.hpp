@@ -52,12 +52,23 @@ inline std::vector<std::pair<std::size_t, std::size_t>> window_pairs(const std::
   return capture_pairs(images, [window](std::size_t a, std::size_t b) { return b - a <= window; });
 }
 
+/// The sphere local_metres and local_to_gps map on: the Earth's mean radius, in metres.
+inline constexpr double kEarthRadius = 6371008.8;
+inline constexpr double kRadiansPerDegree = 3.14159265358979323846 / 180.0;
+
 /// A GPS position (latitude, longitude in degrees, altitude in metres) as metres east, north and up
 /// of (lat0, lon0) on a sphere of the Earth's mean radius: exact enough for the distances between
 /// the captures of one flight (under 0.1 % over a few kilometres).
 inline std::array<double, 3> local_metres(const std::array<double, 3>& gps, double lat0, double lon0) {
-  constexpr double kEarthRadius = 6371008.8, kRad = 3.14159265358979323846 / 180.0;
-  return {kEarthRadius * (gps[1] - lon0) * kRad * std::cos(lat0 * kRad), kEarthRadius * (gps[0] - lat0) * kRad, gps[2]};
+  return {kEarthRadius * (gps[1] - lon0) * kRadiansPerDegree * std::cos(lat0 * kRadiansPerDegree),
+          kEarthRadius * (gps[0] - lat0) * kRadiansPerDegree, gps[2]};
+}
+
+/// The inverse of local_metres: metres east, north and up of (lat0, lon0) as latitude, longitude
+/// (degrees) and altitude (metres).
+inline std::array<double, 3> local_to_gps(const std::array<double, 3>& enu, double lat0, double lon0) {
+  return {lat0 + enu[1] / (kEarthRadius * kRadiansPerDegree),
+          lon0 + enu[0] / (kEarthRadius * kRadiansPerDegree * std::cos(lat0 * kRadiansPerDegree)), enu[2]};
 }
 
 /// Neighbour matching: two images of one capture, and two images of the same band whose captures

@@ -47,6 +47,7 @@
 #include "../io/error.hpp"
 #include "../io/file.hpp"
 #include "../io/image_io.hpp"
+#include "../io/match_pairs.hpp"
 #include "dataset.hpp"
 #include "render.hpp"
 #include "scene.hpp"
@@ -168,10 +169,7 @@ inline std::string rdf_seq(const std::vector<double>& v) {
 /// camera's style: DJI's decimal degrees and absolute altitude, otherwise XMP exif "DD,MM.mmmmmmK"
 /// with the altitude as a rational. The origin is placed at 51.98 N, 5.66 E, 20 m above sea level.
 inline void add_gps(const std::string& camera, const Vec3f& p, std::vector<std::pair<std::string, std::string>>& attrs) {
-  constexpr double kEarthRadius = 6371008.8, kDeg = 180.0 / 3.14159265358979323846, lat0 = 51.98, lon0 = 5.66;
-  const double lat = lat0 + double(p.y()) / kEarthRadius * kDeg;
-  const double lon = lon0 + double(p.x()) / (kEarthRadius * std::cos(lat0 / kDeg)) * kDeg;
-  const double alt = 20.0 + double(p.z());
+  const auto [lat, lon, alt] = io::local_to_gps({double(p.x()), double(p.y()), 20.0 + double(p.z())}, 51.98, 5.66);
   if (camera == "dji") {
     attrs.emplace_back("drone-dji:GpsLatitude", g10(lat));
     attrs.emplace_back("drone-dji:GpsLongitude", g10(lon));
