@@ -15,6 +15,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <set>
 #include <stdexcept>
 #include <string>
@@ -31,6 +32,7 @@
 #include <msgs/io/match_pairs.hpp>
 #include <msgs/io/ply.hpp>
 #include <msgs/io/radiometry.hpp>
+#include <msgs/io/rig_poses.hpp>
 
 #include "commands.hpp"
 #include "subprocess.hpp"
@@ -45,7 +47,7 @@ constexpr const char* kUsage =
     "usage: msgs import --images DIR --out DIR [--camera auto|micasense|dji|sequoia]\n"
     "                   [--bands PATTERN=ID,...] [--eval-every N] [--camera-model M]\n"
     "                   [--radiometry auto|none] [--matching exhaustive|window|gps]\n"
-    "                   [--window N] [--neighbours K] [--allow-partial] [--force]\n"
+    "                   [--window N] [--neighbours K] [--rig on|off] [--allow-partial] [--force]\n"
     "                   [--colmap BIN] [--exiv2 BIN] [--keep-work]\n"
     "\n"
     "Turn a folder of raw multi-band captures into the multi-spectral dataset layout (transforms.json,\n"
@@ -62,7 +64,12 @@ constexpr const char* kUsage =
     "  3. Poses with COLMAP on the CPU (feature_extractor with one camera per band and the focal\n"
     "     length from the metadata as prior; matching of every pair, of nearby captures by GPS or\n"
     "     of a window of captures; mapper) on 8-bit copies; the largest model is kept. Every image\n"
-    "     must register (else an error names the ones that did not).\n"
+    "     must register or be placed by the rig (else an error names the ones that did not).\n"
+    "  4. The rig: the lenses of a multi-band camera fire together from fixed mounts, so an image\n"
+    "     COLMAP did not register (matching across bands is hard) is placed through a band of its\n"
+    "     own capture that registered, with the bands' offset measured on the captures where both\n"
+    "     did; captures that disagree with the offset are left out of it, and a band without 3\n"
+    "     agreeing captures is not placed. transforms.json says which frames were (\"pose\").\n"
     "Everything is built in a temporary folder beside --out and renamed into place at the end.\n"
     "\n"
     "  --images DIR        folder of captures (searched recursively)\n"
@@ -87,7 +94,9 @@ constexpr const char* kUsage =
     "                      ground is in about 4 to 6 consecutive captures at 75-80% forward overlap)\n"
     "  --neighbours K      nearest captures that gps matching pairs each capture with (default 12:\n"
     "                      about 5 along a survey line times 3 across at 75% / 65% overlap)\n"
-    "  --allow-partial     drop images COLMAP could not register (with a warning) instead of failing\n"
+    "  --rig R             on (default: place images COLMAP did not register by the rig, step 4)\n"
+    "                      or off (only COLMAP's poses)\n"
+    "  --allow-partial     drop images that have no pose (with a warning) instead of failing\n"
     "  --force             replace an existing --out once the new dataset is complete\n"
     "  --colmap BIN        COLMAP executable (default: colmap on PATH)\n"
     "  --exiv2 BIN         exiv2 executable (default: exiv2 on PATH)\n"
@@ -233,10 +242,86 @@ std::vector<std::array<double, 3>> capture_positions(const std::vector<Item>& it
   return pos;
 }
 
+/// Images the rig placed (step 4 of the usage): COLMAP records with their band's intrinsics and
+/// the rig's pose, the band of its capture each was placed from, and the rig for transforms.json.
+struct RigResult {
+  msgs::io::Rig rig;
+  std::vector<msgs::io::ColmapImage> images;
+  std::map<std::string, std::string> from;  ///< COLMAP image name -> the band it was placed from
+  nlohmann::ordered_json report;
+};
+
+/// Places the images of `items` missing from `registered` by the rig of the registered ones.
+RigResult place_unregistered(const std::vector<Item>& items, std::size_t captures,
+                             const std::map<std::string, std::vector<std::size_t>>& by_band,
+                             const std::map<std::string, const msgs::io::ColmapImage*>& registered) {
+  RigResult r;
+  std::vector<std::string> bands;
+  std::map<std::string, std::size_t> band_index;
+  for (const auto& entry : by_band) {
+    band_index[entry.first] = bands.size();
+    bands.push_back(entry.first);
+  }
+  const std::size_t B = bands.size();
+  std::vector<std::vector<std::optional<msgs::io::RigPose>>> poses(captures, std::vector<std::optional<msgs::io::RigPose>>(B));
+  std::vector<std::vector<const Item*>> item_at(captures, std::vector<const Item*>(B, nullptr));
+  std::vector<const msgs::io::ColmapImage*> of_band(B, nullptr);  // a registered image of each band: its intrinsics
+  for (const Item& it : items) {
+    const std::size_t b = band_index.at(it.band);
+    item_at[it.capture][b] = &it;
+    const auto reg = registered.find(it.colmap_name);
+    if (reg == registered.end()) continue;
+    const msgs::Camera<float>& cam = reg->second->camera;
+    poses[it.capture][b] = msgs::io::RigPose{cam.R.cast<double>(), cam.t.cast<double>()};
+    if (!of_band[b]) of_band[b] = reg->second;
+  }
+  r.rig = msgs::io::estimate_rig(poses, B, bands);
+  std::vector<std::size_t> placed_per_band(B, 0);
+  for (const auto& p : msgs::io::place_by_rig(poses, r.rig)) {
+    const Item* it = item_at[p.capture][p.band];
+    if (!it) continue;  // the capture has no image of that band
+    msgs::io::ColmapImage im = *of_band[p.band];  // the band has an offset, so an image of it registered
+    im.id = 0;
+    im.name = it->colmap_name;
+    im.camera.R = poses[p.capture][p.band]->R.cast<float>();
+    im.camera.t = poses[p.capture][p.band]->t.cast<float>();
+    r.images.push_back(im);
+    r.from[it->colmap_name] = bands[p.from];
+    ++placed_per_band[p.band];
+  }
+  if (r.rig.reference < 0) return r;
+  r.report["reference"] = bands[std::size_t(r.rig.reference)];
+  r.report["capture_spacing"] = r.rig.capture_spacing;
+  std::string line;
+  for (std::size_t b = 0; b < B; ++b) {
+    if (!r.rig.bands[b] || int(b) == r.rig.reference) continue;
+    const msgs::io::RigOffset& o = *r.rig.bands[b];
+    nlohmann::ordered_json j;
+    j["captures"] = o.samples;
+    j["agreeing"] = o.inliers;
+    j["rotation_spread_deg"] = o.rotation_spread_deg;
+    j["translation_spread_of_spacing"] = o.translation_spread;
+    j["placed"] = placed_per_band[b];
+    r.report["bands"][bands[b]] = j;
+    if (placed_per_band[b] > 0) {
+      char agree[96];
+      std::snprintf(agree, sizeof agree, "%.3f degrees and %.2f%%", o.rotation_spread_deg, 100.0 * o.translation_spread);
+      line += cat("\n    ", bands[b], ": ", placed_per_band[b], " placed; offset from ", o.inliers, " of ", o.samples,
+                  " captures, which agree within ", agree, " of the capture spacing");
+    }
+  }
+  r.report["problems"] = r.rig.problems;
+  if (!r.images.empty())
+    std::printf("  rig (reference %s): placed %zu image%s COLMAP did not register, through %s capture's other bands:%s\n",
+                bands[std::size_t(r.rig.reference)].c_str(), r.images.size(), r.images.size() == 1 ? "" : "s",
+                r.images.size() == 1 ? "its" : "their", line.c_str());
+  return r;
+}
+
 int run_import(const std::vector<std::string>& argv) {
   const msgs::cli::Args args(argv,
                              {"images", "out", "camera", "bands", "eval-every", "camera-model", "radiometry", "matching", "window",
-                              "neighbours", "colmap", "exiv2"},
+                              "neighbours", "rig", "colmap", "exiv2"},
                              {"force", "allow-partial", "keep-work", "help"});
   if (args.flag("help")) {
     std::fputs(kUsage, stdout);
@@ -274,6 +359,8 @@ int run_import(const std::vector<std::string>& argv) {
   if (window < 1) throw msgs::cli::UsageError("--window expects a positive number of captures");
   const long neighbours = args.integer("neighbours", 12);
   if (neighbours < 1) throw msgs::cli::UsageError("--neighbours expects a positive number of captures");
+  const std::string rig_mode = args.get("rig", "on");
+  if (rig_mode != "on" && rig_mode != "off") throw msgs::cli::UsageError("--rig expects on or off, got '" + rig_mode + "'");
 
   std::error_code ec;
   if (!fs::is_directory(images, ec)) fail(images, "--images folder does not exist or is not a folder");
@@ -555,18 +642,26 @@ int run_import(const std::vector<std::string>& argv) {
                                 "last lines of its log:\n", msgs::cli::tail_lines(log, 15)));
   std::map<std::string, const msgs::io::ColmapImage*> registered;
   for (const auto& im : best.images) registered[im.name] = &im;
+  if (n_models > 1)
+    std::printf("  warning: COLMAP made %d separate models; keeping the largest (%zu images)\n", n_models, best.images.size());
+  RigResult rig;
+  if (rig_mode == "on" && registered.size() < items.size()) {
+    rig = place_unregistered(items, scan.captures.size(), by_band, registered);
+    for (const auto& im : rig.images) registered[im.name] = &im;
+  }
   std::vector<std::string> missing;
   for (const auto& it : items)
     if (!registered.count(it.colmap_name)) missing.push_back(cat(it.source.generic_string(), " (", it.band, ")"));
-  if (n_models > 1)
-    std::printf("  warning: COLMAP made %d separate models; keeping the largest (%zu images)\n", n_models, best.images.size());
   if (!missing.empty()) {
+    std::string why;
+    for (const auto& p : rig.rig.problems) why += "\n  rig: " + p;
     if (!args.flag("allow-partial"))
-      fail(images, cat(missing.size(), " of ", items.size(), " images did not register in COLMAP's model: ",
-                       list_some(missing, 12),
+      fail(images, cat(missing.size(), " of ", items.size(), " images have no pose: COLMAP did not register them",
+                       rig_mode == "on" ? " and the rig could not place them" : "", ": ", list_some(missing, 12), why,
                        "\n  (too little texture or overlap, or bands too different to match across? "
                        "--allow-partial drops them and goes on)"));
-    std::printf("  warning: dropping %zu images that did not register: %s\n", missing.size(), list_some(missing, 8).c_str());
+    std::printf("  warning: dropping %zu images without a pose: %s%s\n", missing.size(), list_some(missing, 8).c_str(),
+                why.c_str());
   }
   // Mean reprojection error from model_analyzer.
   std::optional<double> reproj;
@@ -590,7 +685,9 @@ int run_import(const std::vector<std::string>& argv) {
   meta_json["camera"] = scan.camera;
   meta_json["source"] = images.string();
   meta_json["captures"] = scan.captures.size();
-  meta_json["registered"] = items.size() - missing.size();
+  meta_json["registered"] = items.size() - missing.size() - rig.images.size();
+  meta_json["placed_by_rig"] = rig.images.size();
+  if (!rig.images.empty()) meta_json["rig"] = rig.report;
   meta_json["images"] = items.size();
   meta_json["mean_reprojection_error_px"] = opt_number(reproj);
   meta_json["colmap_camera_model"] = model;
@@ -633,6 +730,8 @@ int run_import(const std::vector<std::string>& argv) {
       rows.push_back(row);
     }
     f["transform_matrix"] = rows;
+    const auto from = rig.from.find(it.colmap_name);
+    f["pose"] = from == rig.from.end() ? "colmap" : "rig from " + from->second;
     f["source"] = it.source.generic_string();
     f["capture"] = scan.captures[it.capture].key;
     nlohmann::ordered_json rad;
@@ -676,8 +775,9 @@ int run_import(const std::vector<std::string>& argv) {
   if (args.flag("keep-work")) std::printf("  work folder kept: %s\n", work.string().c_str());
 
   std::printf("wrote %s\n", out.string().c_str());
-  std::printf("  frames: %zu (%zu train, %zu eval), registered %zu of %zu images in the largest of %d model(s)\n",
-              n_frames, train.size(), eval.size(), items.size() - missing.size(), items.size(), n_models);
+  std::printf("  frames: %zu (%zu train, %zu eval), registered %zu of %zu images in the largest of %d model(s)%s\n",
+              n_frames, train.size(), eval.size(), items.size() - missing.size() - rig.images.size(), items.size(),
+              n_models, rig.images.empty() ? "" : cat(", ", rig.images.size(), " placed by the rig").c_str());
   std::printf("  sparse_pc.ply: %zu points, mean reprojection error %s\n", best.points.size(),
               reproj ? cat(*reproj, " px").c_str() : "n/a");
   std::printf("  time: %.1f s (features %.1f s, matching %.1f s, mapping %.1f s)\n", since(t_start), timings["features"],

@@ -9,8 +9,11 @@
 #include <msgs/io/dataset.hpp>
 #include <msgs/io/image_io.hpp>
 #include <msgs/io/match_pairs.hpp>
+#include <msgs/io/rig_poses.hpp>
 #include <msgs/synth.hpp>
 #include <msgs/synth/raw.hpp>
+
+#include <Eigen/SVD>
 
 #include <algorithm>
 #include <chrono>
@@ -79,6 +82,17 @@ msgs::synth::RawOptions small_micasense_set() {
   opt.width = 160;
   opt.seed = 3;
   return opt;
+}
+
+/// The scene preset small_micasense_set() renders (for its ground truth).
+msgs::synth::SynthPreset small_set_preset(const msgs::synth::RawOptions& opt) {
+  msgs::synth::SynthPreset p = msgs::synth::synth_preset(opt.preset);
+  p.captures = opt.captures;
+  p.ms_width = 160;
+  p.ms_height = 120;
+  p.rgb_width = 240;
+  p.rgb_height = 180;
+  return p;
 }
 
 double median(std::vector<double> v) {
@@ -195,15 +209,7 @@ TEST_CASE("msgs import: synthetic MicaSense captures through exiv2 + COLMAP") {
 
   // Exposure differences removed: against the ground-truth radiance of the same pixels, the
   // normalised values of a band have one ratio in every capture, the raw DNs do not.
-  const msgs::synth::SynthPreset preset = [&] {
-    msgs::synth::SynthPreset p = msgs::synth::synth_preset(opt.preset);
-    p.captures = opt.captures;
-    p.ms_width = 160;
-    p.ms_height = 120;
-    p.rgb_width = 240;
-    p.rgb_height = 180;
-    return p;
-  }();
+  const msgs::synth::SynthPreset preset = small_set_preset(opt);
   const msgs::synth::SynthScene scene = msgs::synth::make_scene(preset, opt.seed);
   const auto bands = msgs::synth::raw_bands("micasense");
   std::map<std::string, std::vector<double>> norm_ratio, raw_ratio;
@@ -282,6 +288,9 @@ TEST_CASE("msgs import --matching window and gps: the pairs of nearby captures r
   const auto [rc_w0, log_w0] = import("--matching window --window 0", "bad");
   CHECK(rc_w0 != 0);
   CHECK_MESSAGE(log_w0.find("--window expects a positive number") != std::string::npos, log_w0);
+  const auto [rc_rig, log_rig] = import("--rig maybe", "bad");
+  CHECK(rc_rig != 0);
+  CHECK_MESSAGE(log_rig.find("--rig expects on or off, got 'maybe'") != std::string::npos, log_rig);
   CHECK(!fs::exists(dir / "bad"));
 
   if (!on_path("exiv2")) {
@@ -310,6 +319,138 @@ TEST_CASE("msgs import --matching window and gps: the pairs of nearby captures r
   CHECK_MESSAGE(log_n.find("--matching window") != std::string::npos, log_n);
   CHECK(!fs::exists(dir / "nogps"));
   CHECK(!leftovers(dir, "nogps"));
+}
+
+TEST_CASE("msgs import: an image COLMAP cannot register is placed by the rig, where the rig put it") {
+  if (!on_path("colmap")) {
+    MESSAGE("SKIPPED: the colmap binary is not on PATH; the rig's placement not tested end to end");
+    return;
+  }
+  const fs::path dir = fresh_dir("rig");
+  const msgs::synth::RawOptions opt = small_micasense_set();
+  msgs::synth::write_synthetic_raw(dir / "raw", opt);
+  // Capture 3's NIR made featureless (its metadata kept): SIFT finds nothing, so COLMAP cannot
+  // register it, as happens to the bands that match poorly across the spectrum on real flights.
+  const fs::path flat = dir / "raw" / "IMG_0003_4.tif";
+  std::string xmp;
+  int w = 0, h = 0;
+  {
+    msgs::io::detail::TiffFile tf(flat, "r");
+    REQUIRE(tf.get());
+    std::uint32_t n = 0, tw = 0, th = 0;
+    void* data = nullptr;
+    REQUIRE(TIFFGetField(tf.get(), TIFFTAG_XMLPACKET, &n, &data));
+    xmp.assign(static_cast<const char*>(data), n);
+    TIFFGetField(tf.get(), TIFFTAG_IMAGEWIDTH, &tw);
+    TIFFGetField(tf.get(), TIFFTAG_IMAGELENGTH, &th);
+    w = int(tw);
+    h = int(th);
+  }
+  msgs::synth::detail::write_raw_tiff(flat, w, h, std::vector<std::uint16_t>(std::size_t(w) * std::size_t(h), 20000), xmp);
+
+  // Without the rig the image has no pose: an error that names it, and nothing left behind.
+  const int rc_off = run(std::string(MSGS_BIN) + " import --rig off --images '" + (dir / "raw").string() + "' --out '" +
+                             (dir / "off").string() + "'",
+                         dir / "off.log");
+  const std::string log_off = slurp(dir / "off.log");
+  CHECK(rc_off != 0);
+  CHECK_MESSAGE(log_off.find("1 of 20 images have no pose: COLMAP did not register them: IMG_0003_4.tif (MS_NIR)") !=
+                    std::string::npos,
+                log_off);
+  CHECK(!fs::exists(dir / "off"));
+  CHECK(!leftovers(dir, "off"));
+
+  const int rc = run(std::string(MSGS_BIN) + " import --images '" + (dir / "raw").string() + "' --out '" +
+                         (dir / "ds").string() + "'",
+                     dir / "import.log");
+  const std::string log = slurp(dir / "import.log");
+  REQUIRE_MESSAGE(rc == 0, log);
+  MESSAGE(log);
+  CHECK(!leftovers(dir, "ds"));
+  CHECK(log.find("placed 1 image COLMAP did not register, through its capture's other bands") != std::string::npos);
+  const Json tf = Json::parse(slurp(dir / "ds" / "transforms.json"));
+  CHECK(tf["msgs_import"]["registered"] == 19);
+  CHECK(tf["msgs_import"]["placed_by_rig"] == 1);
+  CHECK(tf["msgs_import"]["rig"]["bands"]["MS_NIR"]["placed"] == 1);
+  CHECK(tf["msgs_import"]["rig"]["bands"]["MS_NIR"]["agreeing"] == 4);
+  REQUIRE(msgs::io::load_dataset(dir / "ds").frames.size() == 20);
+
+  // Against the truth: COLMAP's frame is the scene's up to a similarity, found from the centres
+  // of the registered images; after it the placed camera sits where the scene put it, as well
+  // as the registered ones do.
+  const msgs::synth::SynthScene scene = msgs::synth::make_scene(small_set_preset(opt), opt.seed);
+  const auto bands = msgs::synth::raw_bands("micasense");
+  std::vector<Eigen::Vector3d> got, want;
+  std::vector<Eigen::Matrix3d> got_R, want_R;
+  int placed = -1;
+  for (const auto& f : tf["frames"]) {
+    const std::string src = f["source"];  // IMG_000N_B.tif
+    const std::size_t capture = std::size_t(std::stoi(src.substr(4, 4)) - 1), bi = std::size_t(src[9] - '1');
+    Eigen::Matrix4f c2w;
+    for (int r = 0; r < 4; ++r)
+      for (int c = 0; c < 4; ++c) c2w(r, c) = f["transform_matrix"][r][c].get<float>();
+    const auto cam = msgs::Camera<float>::from_opengl_c2w(c2w);
+    const msgs::Camera<float>& truth = scene.captures[capture].cameras[std::size_t(bands[bi].mount)];
+    if (src == "IMG_0003_4.tif") {
+      placed = int(got.size());
+      CHECK(f["pose"].get<std::string>().rfind("rig from ", 0) == 0);
+    } else {
+      CHECK(f["pose"] == "colmap");
+    }
+    got.push_back(cam.position().cast<double>());
+    want.push_back(truth.position().cast<double>());
+    got_R.push_back(cam.R.cast<double>());
+    want_R.push_back(truth.R.cast<double>());
+  }
+  REQUIRE(placed >= 0);
+  // Umeyama's least-squares similarity want = scale Q got + shift over the registered images.
+  Eigen::Vector3d mu_got = Eigen::Vector3d::Zero(), mu_want = Eigen::Vector3d::Zero();
+  const double n = double(got.size() - 1);
+  for (std::size_t i = 0; i < got.size(); ++i)
+    if (int(i) != placed) {
+      mu_got += got[i] / n;
+      mu_want += want[i] / n;
+    }
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+  double var = 0;
+  for (std::size_t i = 0; i < got.size(); ++i)
+    if (int(i) != placed) {
+      cov += (want[i] - mu_want) * (got[i] - mu_got).transpose() / n;
+      var += (got[i] - mu_got).squaredNorm() / n;
+    }
+  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(cov, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Vector3d d(1, 1, (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0 ? -1 : 1);
+  const Eigen::Matrix3d Q = svd.matrixU() * d.asDiagonal() * svd.matrixV().transpose();  // COLMAP world -> scene world
+  const double scale = svd.singularValues().dot(d) / var;
+  const Eigen::Vector3d shift = mu_want - scale * Q * mu_got;
+  double spacing = INFINITY;
+  for (std::size_t c = 1; c < scene.captures.size(); ++c)
+    spacing = std::min(spacing, double((scene.captures[c].rig_position - scene.captures[c - 1].rig_position).norm()));
+  // COLMAP keeps each band's principal point at the image centre, where the scene's lenses have
+  // theirs a pixel or two off: every camera of a band is turned by the same degree or so, which
+  // the band's intrinsics make good. So the placed camera's rotation is held to the registered
+  // cameras of its own band.
+  std::vector<double> pos_err, nir_rot_err;
+  double placed_pos = 0, placed_rot = 0;
+  for (std::size_t i = 0; i < got.size(); ++i) {
+    const Eigen::Vector3d p = scale * Q * got[i] + shift;
+    const double e = (p - want[i]).norm() / spacing;
+    const double a = msgs::io::detail::rotation_angle_deg(got_R[i] * Q.transpose(), want_R[i]);
+    if (int(i) == placed) {
+      placed_pos = e;
+      placed_rot = a;
+    } else {
+      pos_err.push_back(e);
+      if (tf["frames"][i]["mm_channel"] == "MS_NIR") nir_rot_err.push_back(a);
+    }
+  }
+  REQUIRE(nir_rot_err.size() == 4);
+  const double nir_max = *std::max_element(nir_rot_err.begin(), nir_rot_err.end());
+  MESSAGE("placed: " << placed_pos << " of the capture spacing from the truth, " << placed_rot
+                     << " degrees; registered: median " << median(pos_err) << " of the spacing, NIR up to " << nir_max
+                     << " degrees");
+  CHECK(placed_pos < 0.05);
+  CHECK(placed_rot < nir_max + 0.5);
 }
 
 TEST_CASE("msgs import: COLMAP failure leaves no output and no temporary folder") {
