@@ -206,6 +206,7 @@ TEST_CASE("msgs import: synthetic MicaSense captures through exiv2 + COLMAP") {
   REQUIRE(tf["msgs_import"]["mean_reprojection_error_px"].is_number());
   CHECK(tf["msgs_import"]["mean_reprojection_error_px"].get<double>() < 1.0);
   CHECK(tf["msgs_import"]["registered"] == 20);
+  CHECK(tf["msgs_import"]["colmap_ba_global_function_tolerance"] == 1e-6);
 
   // Exposure differences removed: against the ground-truth radiance of the same pixels, the
   // normalised values of a band have one ratio in every capture, the raw DNs do not.
@@ -288,6 +289,9 @@ TEST_CASE("msgs import --matching window and gps: the pairs of nearby captures r
   const auto [rc_w0, log_w0] = import("--matching window --window 0", "bad");
   CHECK(rc_w0 != 0);
   CHECK_MESSAGE(log_w0.find("--window expects a positive number") != std::string::npos, log_w0);
+  const auto [rc_tol, log_tol] = import("--ba-tolerance -1", "bad");
+  CHECK(rc_tol != 0);
+  CHECK_MESSAGE(log_tol.find("--ba-tolerance expects a relative change in [0, 1)") != std::string::npos, log_tol);
   const auto [rc_rig, log_rig] = import("--rig maybe", "bad");
   CHECK(rc_rig != 0);
   CHECK_MESSAGE(log_rig.find("--rig expects on or off, got 'maybe'") != std::string::npos, log_rig);
