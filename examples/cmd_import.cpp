@@ -34,6 +34,7 @@
 #include <msgs/io/radiometry.hpp>
 #include <msgs/io/rig_poses.hpp>
 
+#include "colmap_progress.hpp"
 #include "commands.hpp"
 #include "subprocess.hpp"
 
@@ -140,10 +141,26 @@ std::string list_some(const std::vector<std::string>& v, std::size_t n = 6) {
 
 /// A colmap stage with progress, timing, log and the log's tail on failure.
 double run_colmap(const std::string& colmap, const std::string& stage, std::vector<std::string> args,
-                  const fs::path& log) {
+                  const fs::path& log, std::size_t images) {
   std::printf("  colmap %-18s ...", stage.c_str());
   std::fflush(stdout);
   const auto t = Clock::now();
+  std::error_code size_ec;
+  const std::uintmax_t log_start = fs::exists(log, size_ec) ? fs::file_size(log, size_ec) : 0;  // this stage's lines follow
+  // A stage that runs long says how far it has come, every kReportEvery seconds.
+  constexpr double kReportEvery = 30;
+  double next_report = kReportEvery;
+  bool reported = false;
+  const auto report = [&] {
+    const double elapsed = since(t);
+    if (elapsed < next_report) return;
+    next_report = elapsed + kReportEvery;
+    if (const auto p = msgs::cli::colmap_progress(msgs::cli::file_tail(log, 16384, size_ec ? 0 : log_start), images)) {
+      std::printf("\n    %4.0f s: %s", elapsed, p->c_str());
+      std::fflush(stdout);
+      reported = true;
+    }
+  };
   args.insert(args.begin(), {colmap, stage});
   {
     std::FILE* f = std::fopen(log.c_str(), "a");
@@ -157,11 +174,11 @@ double run_colmap(const std::string& colmap, const std::string& stage, std::vect
   // A COLMAP run that uses no CPU for a minute is deadlocked (COLMAP 3.8's feature extractor
   // sometimes is, at random): kill it and run the stage again, once.
   constexpr double kIdleLimit = 60;
-  int rc = msgs::cli::run_process(args, log, log, kIdleLimit);
+  int rc = msgs::cli::run_process(args, log, log, kIdleLimit, report);
   if (rc == msgs::cli::kProcessHung) {
     std::printf(" no progress for %.0f s, killed; again ...", kIdleLimit);
     std::fflush(stdout);
-    rc = msgs::cli::run_process(args, log, log, kIdleLimit);
+    rc = msgs::cli::run_process(args, log, log, kIdleLimit, report);
   }
   const double s = since(t);
   if (rc == msgs::cli::kProcessHung) {
@@ -182,7 +199,8 @@ double run_colmap(const std::string& colmap, const std::string& stage, std::vect
     throw msgs::io::IoError(cat("colmap ", stage, " failed with exit status ", rc, "; last lines of its log",
                                 " (--keep-work keeps the whole log):\n", msgs::cli::tail_lines(log, 25), hint));
   }
-  std::printf(" %6.1f s\n", s);
+  if (reported) std::printf("\n    done in %.1f s\n", s);
+  else std::printf(" %6.1f s\n", s);
   std::fflush(stdout);
   return s;
 }
@@ -587,7 +605,7 @@ int run_import(const std::vector<std::string>& argv) {
       std::printf("  %s: no focal length + focal-plane resolution in the metadata; COLMAP guesses the focal length\n",
                   band.c_str());
     }
-    t_features += run_colmap(colmap->string(), "feature_extractor", a, log);
+    t_features += run_colmap(colmap->string(), "feature_extractor", a, log, idx.size());
   }
   timings["features"] = t_features;
   // Every pair by default: it needs no positions, and a window (msgs/io/match_pairs.hpp) misses
@@ -601,7 +619,7 @@ int run_import(const std::vector<std::string>& argv) {
       std::printf("  note: that many pairs take hours; --matching gps (by the positions in the metadata) or window "
                   "(by the order of the files) matches only nearby captures\n");
     timings["matching"] = run_colmap(colmap->string(), "exhaustive_matcher",
-                                     {"--database_path", db, "--SiftMatching.use_gpu", "0"}, log);
+                                     {"--database_path", db, "--SiftMatching.use_gpu", "0"}, log, 0);
   } else {
     std::vector<msgs::io::PairImage> pi;
     for (const Item& it : items) pi.push_back({it.capture, it.band});
@@ -623,7 +641,7 @@ int run_import(const std::vector<std::string>& argv) {
     timings["matching"] = run_colmap(colmap->string(), "matches_importer",
                                      {"--database_path", db, "--match_list_path", list.string(), "--match_type", "pairs",
                                       "--SiftMatching.use_gpu", "0"},
-                                     log);
+                                     log, 0);
   }
   fs::create_directories(work / "sparse", ec);
   char tolerance[32];
@@ -631,7 +649,7 @@ int run_import(const std::vector<std::string>& argv) {
   timings["mapping"] = run_colmap(colmap->string(), "mapper",
                                   {"--database_path", db, "--image_path", (work / "images").string(), "--output_path",
                                    (work / "sparse").string(), "--Mapper.ba_global_function_tolerance", tolerance},
-                                  log);
+                                  log, items.size());
 
   // ---- 5. the largest model, registration check
   fs::path best_dir;

@@ -15,6 +15,7 @@
 #include <deque>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -71,9 +72,11 @@ inline double process_cpu_seconds(pid_t pid) {
 /// (the same file is fine). Returns the exit status (128 + signal when killed). IoError when the
 /// program cannot be started. With `idle_limit_s` > 0, a child whose CPU time has not advanced for
 /// that long (deadlocked: COLMAP 3.8's feature extractor sometimes stops with every thread
-/// waiting on its job queues) is killed and kProcessHung returned.
+/// waiting on its job queues) is killed and kProcessHung returned. `on_poll`, when given (with
+/// `idle_limit_s` > 0), is called at every check, 20 times a second, while the child runs.
 inline int run_process(const std::vector<std::string>& argv, const std::filesystem::path& out_file,
-                       const std::filesystem::path& err_file, double idle_limit_s = 0) {
+                       const std::filesystem::path& err_file, double idle_limit_s = 0,
+                       const std::function<void()>& on_poll = {}) {
   if (argv.empty()) throw io::IoError("run_process: empty command");
   std::vector<char*> cargv;
   for (const auto& a : argv) cargv.push_back(const_cast<char*>(a.c_str()));
@@ -106,6 +109,7 @@ inline int run_process(const std::vector<std::string>& argv, const std::filesyst
         while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {}
         return kProcessHung;
       }
+      if (on_poll) on_poll();
       ::usleep(50000);
     }
   } else {

@@ -27,6 +27,7 @@
 #include <vector>
 
 #include "fixtures.hpp"
+#include "../examples/colmap_progress.hpp"
 #include "../examples/subprocess.hpp"  // the tool's way of running colmap and exiv2
 
 namespace fs = std::filesystem;
@@ -495,6 +496,43 @@ TEST_CASE("run_process: a child that uses no CPU time is stopped; a busy one run
   // with parallel tests and a niced ctest went a whole period without a clock tick of CPU time.
   CHECK(msgs::cli::run_process({"sh", "-c", "i=0; while [ $i -lt 1600000 ]; do i=$((i+1)); done; exit 3"}, log, log, 1.0) == 3);
   CHECK(msgs::cli::run_process({"sh", "-c", "exit 5"}, log, log) == 5);  // no limit: as before
+  // on_poll runs while the child does (what `msgs import` reports progress from).
+  int polls = 0;
+  CHECK(msgs::cli::run_process({"sleep", "0.3"}, log, log, 5.0, [&] { ++polls; }) == 0);
+  CHECK(polls >= 2);
   CHECK(msgs::cli::process_cpu_seconds(::getpid()) >= 0);
   CHECK(msgs::cli::process_cpu_seconds(-1) == -1);
+}
+
+TEST_CASE("colmap_progress: the latest progress line of a COLMAP log, in words") {
+  using msgs::cli::colmap_progress;
+  CHECK_FALSE(colmap_progress(""));
+  CHECK_FALSE(colmap_progress("Reading workspace...\nElapsed time: 0.1 [minutes]\n"));
+  CHECK(colmap_progress("Processed file [1/48]\n  Name: D_00001.png\nProcessed file [17/48]\n  Name: D_00017.png\n") ==
+        "17 of 48 images read");
+  CHECK(colmap_progress("Matching block [3/12] in 2.1s\n") == "3 of 12 blocks matched");
+  CHECK(colmap_progress("Matching block [2/4, 3/4] in 9.8s") == "7 of 16 blocks matched");
+  // The latest line wins: the mapper's after the matcher's in one log.
+  const std::string log = "Matching block [12/12] in 1.0s\n==============\nRegistering image #7 (3)\n"
+                          "==============\n  => Image sees 100 / 200 points\nRegistering image #12 (4)\n";
+  CHECK(colmap_progress(log) == "4 images registered");
+  CHECK(colmap_progress(log, 240) == "4 of 240 images registered");
+  CHECK_FALSE(colmap_progress("Registering image #x (y)"));  // not numbers: nothing said
+
+  // file_tail: the end of a file, and only what came after a given offset (a stage's own lines).
+  const fs::path p = msgs::testing::scratch_dir("import") / "tail.log";
+  {
+    std::ofstream out(p);
+    out << "Matching block [12/12]\n";
+  }
+  const std::uintmax_t start = fs::file_size(p);
+  CHECK(colmap_progress(msgs::cli::file_tail(p)) == "12 of 12 blocks matched");
+  CHECK(msgs::cli::file_tail(p, 16384, start).empty());
+  {
+    std::ofstream out(p, std::ios::app);
+    out << "Registering image #1 (2)\n";
+  }
+  CHECK(colmap_progress(msgs::cli::file_tail(p, 16384, start)) == "2 images registered");
+  CHECK(msgs::cli::file_tail(p, 6) == "1 (2)\n");
+  CHECK(msgs::cli::file_tail(p / "missing").empty());
 }
