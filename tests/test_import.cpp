@@ -23,6 +23,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -94,6 +95,18 @@ msgs::synth::SynthPreset small_set_preset(const msgs::synth::RawOptions& opt) {
   p.rgb_width = 240;
   p.rgb_height = 180;
   return p;
+}
+
+/// The scratch folder of a test case that runs COLMAP, with small_micasense_set() written into
+/// raw/; nullopt, with a message saying what goes untested, when colmap is not on PATH.
+std::optional<fs::path> colmap_case(const std::string& name, const std::string& untested) {
+  if (!on_path("colmap")) {
+    MESSAGE("SKIPPED: the colmap binary is not on PATH (scripts/setup.sh installs it); " << untested << " not tested");
+    return std::nullopt;
+  }
+  const fs::path dir = fresh_dir(name);
+  msgs::synth::write_synthetic_raw(dir / "raw", small_micasense_set());
+  return dir;
 }
 
 double median(std::vector<double> v) {
@@ -178,13 +191,10 @@ TEST_CASE("msgs import: junk names and an existing --out are refused, nothing le
 }
 
 TEST_CASE("msgs import: synthetic MicaSense captures through exiv2 + COLMAP") {
-  if (!on_path("colmap")) {
-    MESSAGE("SKIPPED: the colmap binary is not on PATH (scripts/setup.sh installs it); import end to end not tested");
-    return;
-  }
-  const fs::path dir = fresh_dir("e2e");
+  const auto dir_or = colmap_case("e2e", "import end to end");
+  if (!dir_or) return;
+  const fs::path& dir = *dir_or;
   const msgs::synth::RawOptions opt = small_micasense_set();
-  msgs::synth::write_synthetic_raw(dir / "raw", opt);
 
   const auto t0 = std::chrono::steady_clock::now();
   const int rc = run(std::string(MSGS_BIN) + " import --images '" + (dir / "raw").string() + "' --out '" +
@@ -256,12 +266,9 @@ TEST_CASE("msgs import: synthetic MicaSense captures through exiv2 + COLMAP") {
 }
 
 TEST_CASE("msgs import --matching window and gps: the pairs of nearby captures register the whole set") {
-  if (!on_path("colmap")) {
-    MESSAGE("SKIPPED: the colmap binary is not on PATH");
-    return;
-  }
-  const fs::path dir = fresh_dir("window");
-  msgs::synth::write_synthetic_raw(dir / "raw", small_micasense_set());
+  const auto dir_or = colmap_case("window", "matching by window and by GPS");
+  if (!dir_or) return;
+  const fs::path& dir = *dir_or;
   const auto import = [&](const std::string& flags, const std::string& out) {
     const int rc = run(std::string(MSGS_BIN) + " import --images '" + (dir / "raw").string() + "' --out '" +
                            (dir / out).string() + "' --radiometry none " + flags,
@@ -281,21 +288,17 @@ TEST_CASE("msgs import --matching window and gps: the pairs of nearby captures r
   CHECK(tf["msgs_import"]["mean_reprojection_error_px"].get<double>() < 1.0);
 
   // Bad values are refused before any work, naming the option.
-  const auto [rc_bad, log_bad] = import("--matching sequential", "bad");
-  CHECK(rc_bad != 0);
-  CHECK_MESSAGE(log_bad.find("--matching expects exhaustive, window or gps") != std::string::npos, log_bad);
-  const auto [rc_k0, log_k0] = import("--matching gps --neighbours 0", "bad");
-  CHECK(rc_k0 != 0);
-  CHECK_MESSAGE(log_k0.find("--neighbours expects a positive number") != std::string::npos, log_k0);
-  const auto [rc_w0, log_w0] = import("--matching window --window 0", "bad");
-  CHECK(rc_w0 != 0);
-  CHECK_MESSAGE(log_w0.find("--window expects a positive number") != std::string::npos, log_w0);
-  const auto [rc_tol, log_tol] = import("--ba-tolerance -1", "bad");
-  CHECK(rc_tol != 0);
-  CHECK_MESSAGE(log_tol.find("--ba-tolerance expects a relative change in [0, 1)") != std::string::npos, log_tol);
-  const auto [rc_rig, log_rig] = import("--rig maybe", "bad");
-  CHECK(rc_rig != 0);
-  CHECK_MESSAGE(log_rig.find("--rig expects on or off, got 'maybe'") != std::string::npos, log_rig);
+  const std::vector<std::pair<std::string, std::string>> refused = {
+      {"--matching sequential", "--matching expects exhaustive, window or gps"},
+      {"--matching gps --neighbours 0", "--neighbours expects a positive number"},
+      {"--matching window --window 0", "--window expects a positive number"},
+      {"--ba-tolerance -1", "--ba-tolerance expects a relative change in [0, 1)"},
+      {"--rig maybe", "--rig expects on or off, got 'maybe'"}};
+  for (const auto& [flags, message] : refused) {
+    const auto [rc_bad, log_bad] = import(flags, "bad");
+    CHECK_MESSAGE(rc_bad != 0, flags);
+    CHECK_MESSAGE(log_bad.find(message) != std::string::npos, log_bad);
+  }
   CHECK(!fs::exists(dir / "bad"));
 
   if (!on_path("exiv2")) {
@@ -327,13 +330,10 @@ TEST_CASE("msgs import --matching window and gps: the pairs of nearby captures r
 }
 
 TEST_CASE("msgs import: an image COLMAP cannot register is placed by the rig, where the rig put it") {
-  if (!on_path("colmap")) {
-    MESSAGE("SKIPPED: the colmap binary is not on PATH; the rig's placement not tested end to end");
-    return;
-  }
-  const fs::path dir = fresh_dir("rig");
+  const auto dir_or = colmap_case("rig", "the rig's placement end to end");
+  if (!dir_or) return;
+  const fs::path& dir = *dir_or;
   const msgs::synth::RawOptions opt = small_micasense_set();
-  msgs::synth::write_synthetic_raw(dir / "raw", opt);
   // Capture 3's NIR made featureless (its metadata kept): SIFT finds nothing, so COLMAP cannot
   // register it, as happens to the bands that match poorly across the spectrum on real flights.
   const fs::path flat = dir / "raw" / "IMG_0003_4.tif";
