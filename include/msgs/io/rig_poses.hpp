@@ -50,6 +50,7 @@ struct RigOffset {
 struct Rig {
   int reference = -1;                          ///< band index; -1: no band registered
   double capture_spacing = 0;                  ///< median distance from a reference camera to its nearest one
+  std::vector<std::size_t> registered;         ///< [bands]: captures where each band has a pose
   std::vector<std::optional<RigOffset>> bands; ///< [bands]: the reference's is the identity
   std::vector<std::string> problems;           ///< one line per band without an offset, saying why
 };
@@ -91,7 +92,8 @@ inline Rig estimate_rig(const std::vector<std::vector<std::optional<RigPose>>>& 
                         const std::vector<std::string>& band_names, const RigTolerance& tol = {}) {
   Rig rig;
   rig.bands.assign(band_count, std::nullopt);
-  std::vector<std::size_t> count(band_count, 0);
+  rig.registered.assign(band_count, 0);
+  std::vector<std::size_t>& count = rig.registered;
   for (const auto& cap : poses)
     for (std::size_t b = 0; b < band_count && b < cap.size(); ++b) count[b] += cap[b].has_value();
   std::size_t best = 0;
@@ -189,7 +191,7 @@ struct RigPlacement {
   std::size_t capture = 0, band = 0, from = 0;
 };
 
-/// Poses every image missing from `poses` whose band has an offset, through a registered band of
+/// Poses every image missing from `poses` (the poses `rig` was estimated from) whose band has an offset, through a registered band of
 /// its own capture that has one too (the reference where it registered, else the band with the
 /// most registered captures, the first of a tie): x_band = R_b R_f^T (x_from - t_f) + t_b, with
 /// (R_b, t_b) and (R_f, t_f) the two bands' offsets from the reference. Returns what it placed,
@@ -199,9 +201,7 @@ inline std::vector<RigPlacement> place_by_rig(std::vector<std::vector<std::optio
   if (rig.reference < 0) return placed;
   const std::size_t B = rig.bands.size();
   std::vector<std::size_t> order;  // source bands by preference
-  std::vector<std::size_t> count(B, 0);
-  for (const auto& cap : poses)
-    for (std::size_t b = 0; b < B && b < cap.size(); ++b) count[b] += cap[b].has_value();
+  const std::vector<std::size_t>& count = rig.registered;
   for (std::size_t b = 0; b < B; ++b)
     if (rig.bands[b]) order.push_back(b);
   std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
