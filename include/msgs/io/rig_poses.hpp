@@ -69,6 +69,20 @@ inline double median_of(std::vector<double>& v) {
   return v[v.size() / 2];
 }
 
+/// The median over `points` of the distance from each to its nearest other one; 0 with fewer
+/// than two points.
+inline double median_nearest_distance(const std::vector<Eigen::Vector3d>& points) {
+  if (points.size() < 2) return 0.0;
+  std::vector<double> nearest;
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    double d = INFINITY;
+    for (std::size_t j = 0; j < points.size(); ++j)
+      if (j != i) d = std::min(d, (points[i] - points[j]).norm());
+    nearest.push_back(d);
+  }
+  return median_of(nearest);
+}
+
 /// The relative pose x_b = R x_a + t of two poses of one capture.
 inline RigPose relative_pose(const RigPose& a, const RigPose& b) {
   RigPose r;
@@ -108,16 +122,7 @@ inline Rig estimate_rig(const std::vector<std::vector<std::optional<RigPose>>>& 
   std::vector<Eigen::Vector3d> centres;
   for (std::size_t c = 0; c < poses.size(); ++c)
     if (has(c, ref)) centres.push_back(-(poses[c][ref]->R.transpose() * poses[c][ref]->t));
-  if (centres.size() >= 2) {
-    std::vector<double> nearest;
-    for (std::size_t i = 0; i < centres.size(); ++i) {
-      double d = INFINITY;
-      for (std::size_t j = 0; j < centres.size(); ++j)
-        if (j != i) d = std::min(d, (centres[i] - centres[j]).norm());
-      nearest.push_back(d);
-    }
-    rig.capture_spacing = detail::median_of(nearest);
-  }
+  rig.capture_spacing = detail::median_nearest_distance(centres);
   // Where every capture sits at one spot (or only one registered), the translation is not checked.
   const double spacing = rig.capture_spacing > 0 && std::isfinite(rig.capture_spacing) ? rig.capture_spacing : INFINITY;
 
