@@ -30,6 +30,7 @@
 #include <msgs/io/file.hpp>
 #include <msgs/io/image_io.hpp>
 #include <msgs/io/match_pairs.hpp>
+#include <msgs/io/model_alignment.hpp>
 #include <msgs/io/ply.hpp>
 #include <msgs/io/radiometry.hpp>
 #include <msgs/io/rig_poses.hpp>
@@ -48,8 +49,9 @@ constexpr const char* kUsage =
     "usage: msgs import --images DIR --out DIR [--camera auto|micasense|dji|sequoia]\n"
     "                   [--bands PATTERN=ID,...] [--eval-every N] [--camera-model M]\n"
     "                   [--radiometry auto|none] [--matching exhaustive|window|gps]\n"
-    "                   [--window N] [--neighbours K] [--ba-tolerance X] [--rig on|off]\n"
-    "                   [--allow-partial] [--force] [--colmap BIN] [--exiv2 BIN] [--keep-work]\n"
+    "                   [--window N] [--neighbours K] [--ba-tolerance X] [--merge-models on|off]\n"
+    "                   [--rig on|off] [--allow-partial] [--force] [--colmap BIN] [--exiv2 BIN]\n"
+    "                   [--keep-work]\n"
     "\n"
     "Turn a folder of raw multi-band captures into the multi-spectral dataset layout (transforms.json,\n"
     "train_split.json, images/, sparse_pc.ply) that `msgs train` reads.\n"
@@ -64,9 +66,14 @@ constexpr const char* kUsage =
     "     tags are missing are left out for that band, with a warning naming the files.\n"
     "  3. Poses with COLMAP on the CPU (feature_extractor with one camera per band and the focal\n"
     "     length from the metadata as prior; matching of every pair, of nearby captures by GPS or\n"
-    "     of a window of captures; mapper) on 8-bit copies; the largest model is kept. Every image\n"
-    "     must register or be placed by the rig (else an error names the ones that did not).\n"
-    "  4. The rig: the lenses of a multi-band camera fire together from fixed mounts, so an image\n"
+    "     of a window of captures; mapper) on 8-bit copies; the largest model is the main one. Every\n"
+    "     image must register or be posed by steps 4 and 5 (else an error names the ones that did not).\n"
+    "  4. Models of the rest: a band that matches its own images but not the other bands makes no\n"
+    "     part of the main model. The mapper runs once more on the images the main model lacks, and\n"
+    "     each model it makes is carried into the main model's frame by the similarity that maps\n"
+    "     its capture centres onto the main model's (at least 3 shared captures, within 0.15 of the\n"
+    "     capture spacing, not all along one line; captures that disagree are left out).\n"
+    "  5. The rig: the lenses of a multi-band camera fire together from fixed mounts, so an image\n"
     "     COLMAP did not register (matching across bands is hard) is placed through a band of its\n"
     "     own capture that registered, with the bands' offset measured on the captures where both\n"
     "     did; captures that disagree with the offset are left out of it, and a band without 3\n"
@@ -99,7 +106,8 @@ constexpr const char* kUsage =
     "                      bundle adjustment (default 1e-6, as 3DGS's convert.py: on a 240-image\n"
     "                      flight 2.3-4.6x faster than 0, COLMAP's own default, which runs each\n"
     "                      one to its iteration limit, with the same poses)\n"
-    "  --rig R             on (default: place images COLMAP did not register by the rig, step 4)\n"
+    "  --merge-models M    on (default: step 4) or off (the main model only)\n"
+    "  --rig R             on (default: place images COLMAP did not register by the rig, step 5)\n"
     "                      or off (only COLMAP's poses)\n"
     "  --allow-partial     drop images that have no pose (with a warning) instead of failing\n"
     "  --force             replace an existing --out once the new dataset is complete\n"
@@ -264,7 +272,7 @@ std::vector<std::array<double, 3>> capture_positions(const std::vector<Item>& it
   return pos;
 }
 
-/// Images the rig placed (step 4 of the usage): COLMAP records with their band's intrinsics and
+/// Images the rig placed (step 5 of the usage): COLMAP records with their band's intrinsics and
 /// the rig's pose, the band of its capture each was placed from, and the rig for transforms.json.
 struct RigResult {
   msgs::io::Rig rig;
@@ -340,10 +348,138 @@ RigResult place_unregistered(const std::vector<Item>& items, std::size_t capture
   return r;
 }
 
+/// A COLMAP image's pose as a RigPose.
+msgs::io::RigPose pose_of(const msgs::io::ColmapImage& im) {
+  return msgs::io::RigPose{im.camera.R.cast<double>(), im.camera.t.cast<double>()};
+}
+
+/// Models of the images the main model lacks (step 4 of the usage): the mapper once more, on those
+/// images alone, and each model it makes carried into the main model's frame through the
+/// captures both hold (msgs/io/model_alignment.hpp).
+struct MergeResult {
+  std::vector<msgs::io::ColmapImage> images;  ///< carried over, posed in the main frame
+  msgs::io::PointCloud points;                ///< the carried models' points, in the main frame
+  std::map<std::string, std::string> from;    ///< COLMAP image name -> its "pose" in transforms.json
+  nlohmann::ordered_json report;
+  std::vector<std::string> problems;
+  double seconds = 0;
+};
+
+MergeResult merge_rest_models(const std::vector<Item>& items, std::size_t captures,
+                              const std::map<std::string, const msgs::io::ColmapImage*>& registered,
+                              const std::string& colmap, const fs::path& work, const fs::path& log,
+                              const std::string& ba_tolerance) {
+  MergeResult r;
+  const msgs::io::AlignTolerance tol;
+  std::map<std::string, const Item*> item_of;
+  std::vector<const Item*> rest;
+  std::set<std::size_t> rest_captures;
+  for (const Item& it : items) {
+    item_of[it.colmap_name] = &it;
+    if (registered.count(it.colmap_name)) continue;
+    rest.push_back(&it);
+    rest_captures.insert(it.capture);
+  }
+  // A model of fewer captures could not be aligned: those images are the rig's.
+  if (rest_captures.size() < tol.min_captures) return r;
+  std::string list;
+  for (const Item* it : rest) list += it->colmap_name + "\n";
+  const fs::path list_path = work / "rest_images.txt", out = work / "sparse_rest";
+  msgs::io::write_text_atomic(list_path, list);
+  std::error_code ec;
+  fs::create_directories(out, ec);
+  std::printf("  %zu images in %zu captures are not in the main model: the mapper on them alone\n", rest.size(),
+              rest_captures.size());
+  try {
+    r.seconds = run_colmap(colmap, "mapper",
+                           {"--database_path", (work / "database.db").string(), "--image_path", (work / "images").string(),
+                            "--output_path", out.string(), "--image_list_path", list_path.string(),
+                            "--Mapper.ba_global_function_tolerance", ba_tolerance},
+                           log, rest.size());
+  } catch (const msgs::io::IoError&) {  // no model among them: say so, and leave them to the rig
+    r.problems.push_back(cat("the mapper made no model of the ", rest.size(), " images the main model lacks"));
+    return r;
+  }
+  std::vector<msgs::io::ColmapModel> models;
+  for (const auto& e : fs::directory_iterator(out, ec))
+    if (e.is_directory()) models.push_back(msgs::io::read_colmap(e.path()));
+  std::stable_sort(models.begin(), models.end(), [](const auto& a, const auto& b) { return a.images.size() > b.images.size(); });
+  if (models.empty()) r.problems.push_back(cat("the mapper made no model of the ", rest.size(), " images the main model lacks"));
+
+  std::vector<std::pair<std::size_t, msgs::io::RigPose>> main_cameras;
+  for (const auto& [name, im] : registered) main_cameras.emplace_back(item_of.at(name)->capture, pose_of(*im));
+  const msgs::io::CaptureCentres main_centres = msgs::io::capture_centres(main_cameras, captures);
+  std::set<std::string> taken;  // a model made later never overrides an earlier one
+  r.report = nlohmann::ordered_json::array();
+  for (std::size_t k = 0; k < models.size(); ++k) {
+    const msgs::io::ColmapModel& m = models[k];
+    std::vector<std::pair<std::size_t, msgs::io::RigPose>> cameras;
+    std::map<std::string, int> bands;
+    for (const auto& im : m.images) {
+      const auto it = item_of.find(im.name);
+      if (it == item_of.end() || registered.count(im.name) || taken.count(im.name)) continue;
+      cameras.emplace_back(it->second->capture, pose_of(im));
+      ++bands[it->second->band];
+    }
+    std::string band_list;
+    for (const auto& [b, n] : bands) band_list += cat(band_list.empty() ? "" : ", ", b, " ", n);
+    const msgs::io::ModelAlignment a =
+        msgs::io::align_by_captures(main_centres, msgs::io::capture_centres(cameras, captures), tol);
+    nlohmann::ordered_json j;
+    j["images"] = cameras.size();
+    j["bands"] = bands;
+    j["shared_captures"] = a.shared;
+    j["agreeing"] = a.agreeing;
+    const std::string what = cat("a model of ", cameras.size(), " images (", band_list, ")");
+    if (!a.to_main) {
+      j["problem"] = a.problem;
+      r.report.push_back(j);
+      r.problems.push_back(cat(what, " ", a.problem));
+      continue;
+    }
+    j["median_residual_of_spacing"] = a.median_residual;
+    j["max_residual_of_spacing"] = a.max_residual;
+    j["scale"] = a.to_main->scale;
+    const std::set<std::size_t> disagreeing(a.disagreeing.begin(), a.disagreeing.end());
+    std::size_t carried = 0, left = 0;
+    for (const auto& im : m.images) {
+      const auto it = item_of.find(im.name);
+      if (it == item_of.end() || registered.count(im.name) || taken.count(im.name)) continue;
+      if (disagreeing.count(it->second->capture)) {
+        ++left;  // registered elsewhere in this model than in the main one
+        continue;
+      }
+      msgs::io::ColmapImage c = im;
+      const msgs::io::RigPose p = msgs::io::pose_in_main_frame(pose_of(im), *a.to_main);
+      c.id = 0;
+      c.camera.R = p.R.cast<float>();
+      c.camera.t = p.t.cast<float>();
+      r.images.push_back(c);
+      r.from[im.name] = cat("colmap, model of the rest aligned by ", a.agreeing, " captures");
+      taken.insert(im.name);
+      ++carried;
+    }
+    j["carried"] = carried;
+    j["left_disagreeing"] = left;
+    r.report.push_back(j);
+    for (std::size_t i = 0; i < m.points.size(); ++i) {
+      const Eigen::Vector3d x = (*a.to_main)(Eigen::Vector3d(m.points.xyz[3 * i], m.points.xyz[3 * i + 1], m.points.xyz[3 * i + 2]));
+      for (int d = 0; d < 3; ++d) r.points.xyz.push_back(float(x[d]));
+      for (int d = 0; d < 3 && m.points.has_colour(); ++d) r.points.rgb.push_back(m.points.rgb[3 * i + std::size_t(d)]);
+    }
+    char fit[128];
+    std::snprintf(fit, sizeof fit, "within %.3f of the capture spacing (median %.3f)", a.max_residual, a.median_residual);
+    std::printf("  carried %zu images of %s into the main model, aligned by %zu of %zu shared captures %s%s\n", carried,
+                what.c_str(), a.agreeing, a.shared, fit,
+                left ? cat("; ", left, " left out (their captures disagree)").c_str() : "");
+  }
+  return r;
+}
+
 int run_import(const std::vector<std::string>& argv) {
   const msgs::cli::Args args(argv,
                              {"images", "out", "camera", "bands", "eval-every", "camera-model", "radiometry", "matching", "window",
-                              "neighbours", "ba-tolerance", "rig", "colmap", "exiv2"},
+                              "neighbours", "ba-tolerance", "merge-models", "rig", "colmap", "exiv2"},
                              {"force", "allow-partial", "keep-work", "help"});
   if (args.flag("help")) {
     std::fputs(kUsage, stdout);
@@ -384,6 +520,9 @@ int run_import(const std::vector<std::string>& argv) {
   const double ba_tolerance = args.number("ba-tolerance", 1e-6);
   if (!(ba_tolerance >= 0 && ba_tolerance < 1))
     throw msgs::cli::UsageError("--ba-tolerance expects a relative change in [0, 1), e.g. 1e-6 or 0");
+  const std::string merge_mode = args.get("merge-models", "on");
+  if (merge_mode != "on" && merge_mode != "off")
+    throw msgs::cli::UsageError("--merge-models expects on or off, got '" + merge_mode + "'");
   const std::string rig_mode = args.get("rig", "on");
   if (rig_mode != "on" && rig_mode != "off") throw msgs::cli::UsageError("--rig expects on or off, got '" + rig_mode + "'");
 
@@ -671,6 +810,12 @@ int run_import(const std::vector<std::string>& argv) {
   for (const auto& im : best.images) registered[im.name] = &im;
   if (n_models > 1)
     std::printf("  warning: COLMAP made %d separate models; keeping the largest (%zu images)\n", n_models, best.images.size());
+  MergeResult merged;
+  if (merge_mode == "on" && registered.size() < items.size()) {
+    merged = merge_rest_models(items, scan.captures.size(), registered, colmap->string(), work, log, tolerance);
+    timings["mapping"] += merged.seconds;
+    for (const auto& im : merged.images) registered[im.name] = &im;
+  }
   RigResult rig;
   if (rig_mode == "on" && registered.size() < items.size()) {
     rig = place_unregistered(items, scan.captures.size(), by_band, registered);
@@ -681,6 +826,7 @@ int run_import(const std::vector<std::string>& argv) {
     if (!registered.count(it.colmap_name)) missing.push_back(cat(it.source.generic_string(), " (", it.band, ")"));
   if (!missing.empty()) {
     std::string why;
+    for (const auto& p : merged.problems) why += "\n  models of the rest: " + p;
     for (const auto& p : rig.rig.problems) why += "\n  rig: " + p;
     if (!args.flag("allow-partial"))
       fail(images, cat(missing.size(), " of ", items.size(), " images have no pose: COLMAP did not register them",
@@ -712,7 +858,15 @@ int run_import(const std::vector<std::string>& argv) {
   meta_json["camera"] = scan.camera;
   meta_json["source"] = images.string();
   meta_json["captures"] = scan.captures.size();
-  meta_json["registered"] = items.size() - missing.size() - rig.images.size();
+  const std::size_t n_main = items.size() - missing.size() - merged.images.size() - rig.images.size();
+  meta_json["registered"] = n_main;
+  meta_json["from_models_of_the_rest"] = merged.images.size();
+  if (!merged.report.is_null()) {
+    nlohmann::ordered_json mj;
+    mj["models"] = merged.report;
+    mj["problems"] = merged.problems;
+    meta_json["models_of_the_rest"] = mj;
+  }
   meta_json["placed_by_rig"] = rig.images.size();
   if (!rig.images.empty()) meta_json["rig"] = rig.report;
   meta_json["images"] = items.size();
@@ -759,7 +913,10 @@ int run_import(const std::vector<std::string>& argv) {
     }
     f["transform_matrix"] = rows;
     const auto from = rig.from.find(it.colmap_name);
-    f["pose"] = from == rig.from.end() ? "colmap" : "rig from " + from->second;
+    const auto carried = merged.from.find(it.colmap_name);
+    f["pose"] = from != rig.from.end()        ? "rig from " + from->second
+                : carried != merged.from.end() ? carried->second
+                                               : "colmap";
     f["source"] = it.source.generic_string();
     f["capture"] = scan.captures[it.capture].key;
     nlohmann::ordered_json rad;
@@ -793,7 +950,13 @@ int run_import(const std::vector<std::string>& argv) {
   split["train"] = train;
   split["eval"] = eval;
   msgs::io::write_text_atomic(layout / "train_split.json", split.dump(2) + "\n");
-  msgs::io::write_point_cloud(layout / "sparse_pc.ply", best.points);
+  msgs::io::PointCloud cloud = best.points;  // with the points of the models carried over
+  cloud.xyz.insert(cloud.xyz.end(), merged.points.xyz.begin(), merged.points.xyz.end());
+  if (cloud.has_colour() && merged.points.rgb.size() == merged.points.xyz.size())
+    cloud.rgb.insert(cloud.rgb.end(), merged.points.rgb.begin(), merged.points.rgb.end());
+  else
+    cloud.rgb.clear();
+  msgs::io::write_point_cloud(layout / "sparse_pc.ply", cloud);
   // Self-check: the layout loads.
   const msgs::io::Dataset check = msgs::io::load_dataset(layout);
   if (check.frames.size() != n_frames) fail(layout / "transforms.json", "self-check: frame count differs after loading");
@@ -803,10 +966,11 @@ int run_import(const std::vector<std::string>& argv) {
   if (args.flag("keep-work")) std::printf("  work folder kept: %s\n", work.string().c_str());
 
   std::printf("wrote %s\n", out.string().c_str());
-  std::printf("  frames: %zu (%zu train, %zu eval), registered %zu of %zu images in the largest of %d model(s)%s\n",
-              n_frames, train.size(), eval.size(), items.size() - missing.size() - rig.images.size(), items.size(),
-              n_models, rig.images.empty() ? "" : cat(", ", rig.images.size(), " placed by the rig").c_str());
-  std::printf("  sparse_pc.ply: %zu points, mean reprojection error %s\n", best.points.size(),
+  std::printf("  frames: %zu (%zu train, %zu eval), registered %zu of %zu images in the largest of %d model(s)%s%s\n",
+              n_frames, train.size(), eval.size(), n_main, items.size(), n_models,
+              merged.images.empty() ? "" : cat(", ", merged.images.size(), " carried over from models of the rest").c_str(),
+              rig.images.empty() ? "" : cat(", ", rig.images.size(), " placed by the rig").c_str());
+  std::printf("  sparse_pc.ply: %zu points, mean reprojection error %s\n", cloud.size(),
               reproj ? cat(*reproj, " px").c_str() : "n/a");
   std::printf("  time: %.1f s (features %.1f s, matching %.1f s, mapping %.1f s)\n", since(t_start), timings["features"],
               timings["matching"], timings["mapping"]);
