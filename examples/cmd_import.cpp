@@ -373,15 +373,29 @@ MergeResult merge_rest_models(const std::vector<Item>& items, std::size_t captur
   const msgs::io::AlignTolerance tol;
   std::map<std::string, const Item*> item_of;
   std::vector<const Item*> rest;
-  std::set<std::size_t> rest_captures;
+  std::set<std::size_t> rest_captures, main_captures;
   for (const Item& it : items) {
     item_of[it.colmap_name] = &it;
-    if (registered.count(it.colmap_name)) continue;
+    if (registered.count(it.colmap_name)) {
+      main_captures.insert(it.capture);
+      continue;
+    }
     rest.push_back(&it);
     rest_captures.insert(it.capture);
   }
   // A model of fewer captures could not be aligned: those images are the rig's.
   if (rest_captures.size() < tol.min_captures) return r;
+  // Only a capture with images on both sides can be in the main model and in a model of the rest:
+  // with fewer such captures than an alignment needs, the mapper would run for nothing.
+  std::size_t split = 0;
+  for (std::size_t c : rest_captures) split += main_captures.count(c);
+  if (split < tol.min_captures) {
+    r.problems.push_back(cat("the ", rest.size(), " images the main model lacks are in ", rest_captures.size(),
+                             " captures, of which ", split, " have images in the main model; ", tol.min_captures,
+                             " needed to align a model of them (whole captures are missing: too little overlap, or ",
+                             "their pairs were not matched)"));
+    return r;
+  }
   std::string list;
   for (const Item* it : rest) list += it->colmap_name + "\n";
   const fs::path list_path = work / "rest_images.txt", out = work / "sparse_rest";
