@@ -414,14 +414,18 @@ MergeResult merge_rest_models(const std::vector<Item>& items, std::size_t captur
     r.problems.push_back(cat("the mapper made no model of the ", rest.size(), " images the main model lacks"));
     return r;
   }
-  std::vector<msgs::io::ColmapModel> models;
+  std::vector<fs::path> dirs;  // COLMAP's numbered model folders, in name order (then by size below)
   for (const auto& e : fs::directory_iterator(out, ec))
-    if (e.is_directory()) models.push_back(msgs::io::read_colmap(e.path()));
+    if (e.is_directory()) dirs.push_back(e.path());
+  std::sort(dirs.begin(), dirs.end());
+  std::vector<msgs::io::ColmapModel> models;
+  for (const fs::path& d : dirs) models.push_back(msgs::io::read_colmap(d));
   std::stable_sort(models.begin(), models.end(), [](const auto& a, const auto& b) { return a.images.size() > b.images.size(); });
   if (models.empty()) r.problems.push_back(cat("the mapper made no model of the ", rest.size(), " images the main model lacks"));
 
   std::vector<std::pair<std::size_t, msgs::io::RigPose>> main_cameras;
-  for (const auto& [name, im] : registered) main_cameras.emplace_back(item_of.at(name)->capture, pose_of(*im));
+  for (const auto& [name, im] : registered)
+    if (const auto it = item_of.find(name); it != item_of.end()) main_cameras.emplace_back(it->second->capture, pose_of(*im));
   const msgs::io::CaptureCentres main_centres = msgs::io::capture_centres(main_cameras, captures);
   std::set<std::string> taken;  // a model made later never overrides an earlier one
   r.report = nlohmann::ordered_json::array();
