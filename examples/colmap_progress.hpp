@@ -18,8 +18,10 @@ namespace msgs::cli {
 
 /// The latest progress line in `log` (the end of a COLMAP log) in words:
 /// - feature_extractor "Processed file [17/48]": "17 of 48 images read";
-/// - matches_importer "Matching block [3/12]" (printed when a block is done): "3 of 12 blocks matched";
-/// - exhaustive_matcher "Matching block [2/4, 3/4]": "7 of 16 blocks matched";
+/// - matches_importer "Matching block [3/12] in 2.1s": "3 of 12 blocks matched". COLMAP prints
+///   the line's start when it begins a block and " in 2.1s" when the block is done, so a line
+///   without that ending counts one block less: "2 of 12 blocks matched";
+/// - exhaustive_matcher "Matching block [2/4, 3/4] in 9.8s": "7 of 16 blocks matched" (likewise);
 /// - mapper "Registering image #7 (123)": "123 images registered", or "123 of `images` images
 ///   registered" when `images` > 0.
 /// nullopt when the log holds none of them yet.
@@ -34,13 +36,15 @@ inline std::optional<std::string> colmap_progress(std::string_view log, std::siz
   const std::string line(log.substr(last, eol == std::string_view::npos ? std::string_view::npos : eol - last));
   char buf[96];
   unsigned long a = 0, n = 0, b = 0, m = 0, id = 0, count = 0;
+  const std::size_t close = line.find(']');
+  const unsigned long done = close != std::string::npos && line.find(" in ", close) != std::string::npos ? 1 : 0;
   if (last == file && std::sscanf(line.c_str(), "Processed file [%lu/%lu]", &a, &n) == 2) {
     std::snprintf(buf, sizeof buf, "%lu of %lu images read", a, n);
   } else if (last == block && std::sscanf(line.c_str(), "Matching block [%lu/%lu, %lu/%lu]", &a, &n, &b, &m) == 4 &&
              a >= 1 && b >= 1) {
-    std::snprintf(buf, sizeof buf, "%lu of %lu blocks matched", (a - 1) * m + b, n * m);
-  } else if (last == block && std::sscanf(line.c_str(), "Matching block [%lu/%lu]", &a, &n) == 2) {
-    std::snprintf(buf, sizeof buf, "%lu of %lu blocks matched", a, n);
+    std::snprintf(buf, sizeof buf, "%lu of %lu blocks matched", (a - 1) * m + b - 1 + done, n * m);
+  } else if (last == block && std::sscanf(line.c_str(), "Matching block [%lu/%lu]", &a, &n) == 2 && a >= 1) {
+    std::snprintf(buf, sizeof buf, "%lu of %lu blocks matched", a - 1 + done, n);
   } else if (last == reg && std::sscanf(line.c_str(), "Registering image #%lu (%lu)", &id, &count) == 2) {
     if (images > 0) std::snprintf(buf, sizeof buf, "%lu of %zu images registered", count, images);
     else std::snprintf(buf, sizeof buf, "%lu images registered", count);

@@ -581,6 +581,10 @@ TEST_CASE("colmap_progress: the latest progress line of a COLMAP log, in words")
         "17 of 48 images read");
   CHECK(colmap_progress("Matching block [3/12] in 2.1s\n") == "3 of 12 blocks matched");
   CHECK(colmap_progress("Matching block [2/4, 3/4] in 9.8s") == "7 of 16 blocks matched");
+  // A block is announced when it starts and timed when it ends: until then it is not matched.
+  CHECK(colmap_progress("Matching block [1/1]") == "0 of 1 blocks matched");
+  CHECK(colmap_progress("Matching block [3/12] in 2.1s\nMatching block [4/12]") == "3 of 12 blocks matched");
+  CHECK(colmap_progress("Matching block [2/4, 3/4]") == "6 of 16 blocks matched");
   // The latest line wins: the mapper's after the matcher's in one log.
   const std::string log = "Matching block [12/12] in 1.0s\n==============\nRegistering image #7 (3)\n"
                           "==============\n  => Image sees 100 / 200 points\nRegistering image #12 (4)\n";
@@ -592,7 +596,7 @@ TEST_CASE("colmap_progress: the latest progress line of a COLMAP log, in words")
   const fs::path p = msgs::testing::scratch_dir("import") / "tail.log";
   {
     std::ofstream out(p);
-    out << "Matching block [12/12]\n";
+    out << "Matching block [12/12] in 1.0s\n";
   }
   const std::uintmax_t start = fs::file_size(p);
   CHECK(colmap_progress(msgs::cli::file_tail(p)) == "12 of 12 blocks matched");
