@@ -879,9 +879,9 @@ int run_import(const std::vector<std::string>& argv) {
   const std::size_t n_main = items.size() - missing.size() - merged.images.size() - rig.images.size();
   meta_json["registered"] = n_main;
   meta_json["from_models_of_the_rest"] = merged.images.size();
-  if (!merged.report.is_null()) {
+  if (!merged.report.is_null() || !merged.problems.empty()) {  // the second mapper ran, or why it did not
     nlohmann::ordered_json mj;
-    mj["models"] = merged.report;
+    mj["models"] = merged.report.is_null() ? nlohmann::ordered_json::array() : merged.report;
     mj["problems"] = merged.problems;
     meta_json["models_of_the_rest"] = mj;
   }
