@@ -428,17 +428,21 @@ MergeResult merge_rest_models(const std::vector<Item>& items, std::size_t captur
     if (const auto it = item_of.find(name); it != item_of.end()) main_cameras.emplace_back(it->second->capture, pose_of(*im));
   const msgs::io::CaptureCentres main_centres = msgs::io::capture_centres(main_cameras, captures);
   std::set<std::string> taken;  // a model made later never overrides an earlier one
+  // The import's item of a model's image that still needs a pose; nullptr otherwise.
+  const auto needing_pose = [&](const msgs::io::ColmapImage& im) -> const Item* {
+    const auto it = item_of.find(im.name);
+    return it == item_of.end() || registered.count(im.name) || taken.count(im.name) ? nullptr : it->second;
+  };
   r.report = nlohmann::ordered_json::array();
   for (std::size_t k = 0; k < models.size(); ++k) {
     const msgs::io::ColmapModel& m = models[k];
     std::vector<std::pair<std::size_t, msgs::io::RigPose>> cameras;
     std::map<std::string, int> bands;
-    for (const auto& im : m.images) {
-      const auto it = item_of.find(im.name);
-      if (it == item_of.end() || registered.count(im.name) || taken.count(im.name)) continue;
-      cameras.emplace_back(it->second->capture, pose_of(im));
-      ++bands[it->second->band];
-    }
+    for (const auto& im : m.images)
+      if (const Item* item = needing_pose(im)) {
+        cameras.emplace_back(item->capture, pose_of(im));
+        ++bands[item->band];
+      }
     std::string band_list;
     for (const auto& [b, n] : bands) band_list += cat(band_list.empty() ? "" : ", ", b, " ", n);
     const msgs::io::ModelAlignment a =
@@ -461,9 +465,9 @@ MergeResult merge_rest_models(const std::vector<Item>& items, std::size_t captur
     const std::set<std::size_t> disagreeing(a.disagreeing.begin(), a.disagreeing.end());
     std::size_t carried = 0, left = 0;
     for (const auto& im : m.images) {
-      const auto it = item_of.find(im.name);
-      if (it == item_of.end() || registered.count(im.name) || taken.count(im.name)) continue;
-      if (disagreeing.count(it->second->capture)) {
+      const Item* item = needing_pose(im);
+      if (!item) continue;
+      if (disagreeing.count(item->capture)) {
         ++left;  // registered elsewhere in this model than in the main one
         continue;
       }
