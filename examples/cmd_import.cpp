@@ -272,6 +272,11 @@ std::vector<std::array<double, 3>> capture_positions(const std::vector<Item>& it
   return pos;
 }
 
+/// A COLMAP image's pose as a RigPose.
+msgs::io::RigPose pose_of(const msgs::io::ColmapImage& im) {
+  return msgs::io::RigPose{im.camera.R.cast<double>(), im.camera.t.cast<double>()};
+}
+
 /// Images the rig placed (step 5 of the usage): COLMAP records with their band's intrinsics and
 /// the rig's pose, the band of its capture each was placed from, and the rig for transforms.json.
 struct RigResult {
@@ -301,8 +306,7 @@ RigResult place_unregistered(const std::vector<Item>& items, std::size_t capture
     item_at[it.capture][b] = &it;
     const auto reg = registered.find(it.colmap_name);
     if (reg == registered.end()) continue;
-    const msgs::Camera<float>& cam = reg->second->camera;
-    poses[it.capture][b] = msgs::io::RigPose{cam.R.cast<double>(), cam.t.cast<double>()};
+    poses[it.capture][b] = pose_of(*reg->second);
     if (!of_band[b]) of_band[b] = reg->second;
   }
   r.rig = msgs::io::estimate_rig(poses, B, bands);
@@ -346,11 +350,6 @@ RigResult place_unregistered(const std::vector<Item>& items, std::size_t capture
                 bands[std::size_t(r.rig.reference)].c_str(), r.images.size(), r.images.size() == 1 ? "" : "s",
                 r.images.size() == 1 ? "its" : "their", line.c_str());
   return r;
-}
-
-/// A COLMAP image's pose as a RigPose.
-msgs::io::RigPose pose_of(const msgs::io::ColmapImage& im) {
-  return msgs::io::RigPose{im.camera.R.cast<double>(), im.camera.t.cast<double>()};
 }
 
 /// Models of the images the main model lacks (step 4 of the usage): the mapper once more, on those

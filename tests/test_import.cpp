@@ -9,9 +9,8 @@
 #include <msgs/io/dataset.hpp>
 #include <msgs/io/image_io.hpp>
 #include <msgs/io/match_pairs.hpp>
-#include <msgs/io/rig_poses.hpp>
-#include <msgs/io/similarity.hpp>
 #include <msgs/synth.hpp>
+#include <msgs/synth/pose_error.hpp>
 #include <msgs/synth/raw.hpp>
 
 
@@ -131,41 +130,12 @@ struct FrameError {
   double degrees = 0;              ///< rotation from the truth
 };
 
-/// Every frame of `tf` (an import of a `msgs synth --raw` folder of `scene`) against the truth.
-/// COLMAP's frame is the scene's up to a similarity, fitted to the centres of the frames of its
-/// main model ("pose": "colmap"); the other frames are measured after it too. The spacing is the
-/// median distance from a capture to its nearest other one.
+/// Every frame of `tf` (an import of a `msgs synth --raw` folder of `scene`) against the truth
+/// (msgs::synth::frame_pose_errors), positions over the capture spacing.
 std::vector<FrameError> frame_errors(const Json& tf, const msgs::synth::SynthScene& scene) {
+  const msgs::synth::PoseErrors pe = msgs::synth::frame_pose_errors(tf, scene, "transforms.json");
   std::vector<FrameError> out;
-  std::vector<Eigen::Vector3d> got, want, main_got, main_want;
-  std::vector<Eigen::Matrix3d> got_R, want_R;
-  for (const auto& f : tf["frames"]) {
-    const std::string key = f["capture"];  // the capture number ends its key
-    const std::size_t capture = std::size_t(std::stoul(key.substr(key.find_last_not_of("0123456789") + 1))) - 1;
-    const msgs::synth::Band band = msgs::synth::band_from_name(f["mm_channel"].get<std::string>());
-    Eigen::Matrix4f c2w;
-    for (int r = 0; r < 4; ++r)
-      for (int c = 0; c < 4; ++c) c2w(r, c) = f["transform_matrix"][r][c].get<float>();
-    const auto cam = msgs::Camera<float>::from_opengl_c2w(c2w);
-    const msgs::Camera<float>& truth = scene.captures.at(capture).cameras[std::size_t(band)];
-    out.push_back({f["source"], f["mm_channel"], f["pose"], 0.0, 0.0});
-    got.push_back(cam.position().cast<double>());
-    want.push_back(truth.position().cast<double>());
-    got_R.push_back(cam.R.cast<double>());
-    want_R.push_back(truth.R.cast<double>());
-    if (out.back().pose == "colmap") {
-      main_got.push_back(got.back());
-      main_want.push_back(want.back());
-    }
-  }
-  const msgs::io::Similarity sim = msgs::io::fit_similarity(main_got, main_want);  // COLMAP world -> scene world
-  std::vector<Eigen::Vector3d> positions;
-  for (const auto& c : scene.captures) positions.push_back(c.rig_position.cast<double>());
-  const double spacing = msgs::io::detail::median_nearest_distance(positions);
-  for (std::size_t i = 0; i < out.size(); ++i) {
-    out[i].position = (sim(got[i]) - want[i]).norm() / spacing;
-    out[i].degrees = msgs::io::detail::rotation_angle_deg(got_R[i] * sim.R.transpose(), want_R[i]);
-  }
+  for (const auto& f : pe.frames) out.push_back({f.source, f.band, f.pose, f.metres / pe.capture_spacing, f.degrees});
   return out;
 }
 
