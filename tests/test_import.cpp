@@ -315,7 +315,8 @@ TEST_CASE("msgs import --matching window and gps: the pairs of nearby captures r
       {"--matching gps --neighbours 0", "--neighbours expects a positive number"},
       {"--matching window --window 0", "--window expects a positive number"},
       {"--ba-tolerance -1", "--ba-tolerance expects a relative change in [0, 1)"},
-      {"--rig maybe", "--rig expects on or off, got 'maybe'"}};
+      {"--rig maybe", "--rig expects on or off, got 'maybe'"},
+      {"--merge-models yes", "--merge-models expects on or off, got 'yes'"}};
   for (const auto& [flags, message] : refused) {
     const auto [rc_bad, log_bad] = import(flags, "bad");
     CHECK_MESSAGE(rc_bad != 0, flags);
