@@ -440,3 +440,82 @@ TEST_CASE("a colour sink gets the colour gradients the backward would store, onc
       CHECK(geometry);
     }
 }
+
+namespace {
+
+/// `m` with its rows rotated by r: row i holds the Gaussian of row (i + r) mod n.
+template <class G>
+GaussianModel<G, float> rotated(const GaussianModel<G, float>& m, std::size_t r) {
+  const std::size_t n = m.size();
+  GaussianModel<G, float> out(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::size_t s = (i + r) % n;
+    for (int k = 0; k < 3; ++k) {
+      out.means[3 * i + k] = m.means[3 * s + k];
+      out.log_scales[3 * i + k] = m.log_scales[3 * s + k];
+    }
+    for (int k = 0; k < 4; ++k) out.quats[4 * i + k] = m.quats[4 * s + k];
+    out.opacity_logits[i] = m.opacity_logits[s];
+    for (int ch = 0; ch < G::bands; ++ch)
+      for (int k = 0; k < G::sh_coeffs; ++k) out.sh_at(i, k, ch) = m.sh_at(s, k, ch);
+  }
+  return out;
+}
+
+}  // namespace
+
+TEST_CASE_TEMPLATE("the projection writes a whole batch of Gaussians as it writes them one at a time", G, Gaussian<1, 3>,
+                   Gaussian<3, 3>) {
+  // project_all stores a full batch of L consecutive rows as whole vectors and the last, partial
+  // batch lane by lane. Rotating the rows moves every Gaussian through both and through every
+  // lane: the radii, the visible rows, the image and the mean gradients must keep their bits.
+  // Among the Gaussians: hard ones (handed to double precision), a non-finite colour, one behind
+  // the camera and some off screen.
+  constexpr int L = detail::kProjLanesF;
+  const Camera<float> cam = test_camera<float>(70, 45, 41.0, 12.0, 55.0);
+  SceneParams sp;
+  sp.n = std::size_t(5 * L + 3);
+  sp.margin_px = 4;
+  GaussianModel<G, float> m = random_scene<G, float>(cam, sp, 31);
+  m.log_scales[3 * 2 + 1] = 25.0f;                                   // hard: scale e^25
+  m.opacity_logits[7] = std::numeric_limits<float>::quiet_NaN();     // hard: non-finite
+  m.sh_at(11, 0, 0) = std::numeric_limits<float>::infinity();        // culled: colour not finite
+  m.quats[4 * 19 + 2] = 1e16f;                                       // hard: huge quaternion
+  for (int k = 0; k < 3; ++k) m.means[3 * 23 + k] = -m.means[3 * 23 + k];  // behind the camera
+  constexpr RasterOptions kOpt{.single_precision = true, .ties_by_mean = true};
+  RenderSettings<float> rs;
+  rs.band_count = G::bands;
+  const std::size_t n = m.size();
+  Rasterizer<G, float, kOpt> first;
+  first.forward(m, cam, rs);
+  Image<float> w(cam.width, cam.height, G::bands);  // dL/dimage
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  for (float& v : w.data) v = u(rng);
+  Gradients<G, float> g0;
+  first.backward(w, nullptr, nullptr, g0);
+  REQUIRE(first.visible_count() > n / 2);
+  REQUIRE(first.visible_count() < n - 4);
+  for (std::size_t r = 1; r <= std::size_t(L); ++r) {
+    INFO("rows rotated by ", r);
+    const GaussianModel<G, float> mr = rotated(m, r);
+    Rasterizer<G, float, kOpt> rast;
+    rast.forward(mr, cam, rs);
+    Gradients<G, float> gr;
+    rast.backward(w, nullptr, nullptr, gr);
+    CHECK(std::memcmp(rast.image().data.data(), first.image().data.data(), first.image().data.size() * sizeof(float)) == 0);
+    CHECK(rast.fragments() == first.fragments());
+    bool same_radii = true, same_visible = rast.visible_count() == first.visible_count(), same_grad = true;
+    std::vector<std::uint8_t> seen(n, 0);
+    for (std::uint32_t v : rast.visible()) seen[(v + r) % n] = 1;
+    for (std::size_t i = 0; i < n; ++i) {
+      const std::size_t s = (i + r) % n;  // row i of the rotated model is row s of m
+      same_radii = same_radii && rast.radii()[2 * i] == first.radii()[2 * s] && rast.radii()[2 * i + 1] == first.radii()[2 * s + 1];
+      for (int k = 0; k < 3; ++k) same_grad = same_grad && gr.model.means[3 * i + k] == g0.model.means[3 * s + k];
+    }
+    for (std::uint32_t v : first.visible()) same_visible = same_visible && seen[v] == 1;
+    CHECK(same_radii);
+    CHECK(same_visible);
+    CHECK(same_grad);
+  }
+}

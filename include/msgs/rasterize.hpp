@@ -559,6 +559,12 @@ class Rasterizer {
           detail::pixel_rect_lanes(mxd[h], myd[h], exd[h], eyd[h], grid_.width, grid_.height, rect_of + h * detail::kProjLanes);
       }
     }
+    if constexpr (kWholeVectorStores<D>) {
+      if (n == detail::Lanes<D>::kCount && ids[n - 1] == ids[0] + std::uint32_t(n - 1)) {
+        store_batch(ids[0], pl, col, rect_of, drawn, hard);
+        return hard;
+      }
+    }
     for (int l = 0; l < n; ++l) {
       if (hard >> l & 1u) continue;
       const std::size_t i = ids[l];
@@ -587,6 +593,103 @@ class Rasterizer {
       visible_flag_[i] = 1;
     }
     return hard;
+  }
+
+  /// Whether project_batch writes a whole batch of lane type D with vector stores (store_batch):
+  /// single-precision lanes of 8 or more floats into a float rasteriser.
+  template <class D>
+  static constexpr bool kWholeVectorStores = std::is_same_v<D, detail::ProjVecF> && std::is_same_v<S, float> &&
+                                             detail::Lanes<D>::kCount >= 8;
+
+  /// project_batch's outputs for the L consecutive rows from `i0` (none of them padding), as whole
+  /// vectors where the lane loop stores one value at a time: the same values, the same rows.
+  /// `drawn`: the lanes projected with finite colours; `hard`: the lanes handed to double precision,
+  /// whose rows are left alone. The splats move as one transposed block (detail::transpose_square).
+  template <class D>
+  void store_batch(std::size_t i0, const detail::ProjectedLanes<D>& pl, const D* col, const PixelRect* rect_of,
+                   const typename detail::Lanes<D>::M& drawn, std::uint32_t hard) {
+    using LD = detail::Lanes<D>;
+    using I = typename LD::M;  // 32-bit integer lanes
+    constexpr int L = LD::kCount;
+    // The lanes shown (drawn, with a rectangle in the image) and the lanes written (not hard).
+    std::uint32_t shown_bits = detail::lane_bits(drawn) & ~hard;
+    for (int l = 0; l < L; ++l)
+      if (rect_of[l].empty()) shown_bits &= ~(1u << l);
+    I iota;
+    for (int l = 0; l < L; ++l) iota[l] = l;
+    const I shown = -((I{} + std::int32_t(shown_bits)) >> iota & 1), written = -((I{} + std::int32_t(~hard)) >> iota & 1);
+    // Visibility flags, radii and rectangles of every written row.
+    {
+      typedef std::int8_t Bytes __attribute__((vector_size(L)));
+      Bytes flags;
+      std::memcpy(&flags, &visible_flag_[i0], sizeof flags);
+      flags = __builtin_convertvector(written, Bytes) ? __builtin_convertvector(shown & 1, Bytes) : flags;
+      std::memcpy(&visible_flag_[i0], &flags, sizeof flags);
+    }
+    {
+      // min(ceil(e), 1e9) of the shown lanes as integers: ceil of e clamped to [0, 1e9] by
+      // truncation and a step up (exact: below 2^24 the truncation is, above it e is integral).
+      const auto radius = [&](const D& e) {
+        const D c = LD::sel(shown, detail::lmin(e, LD::splat(1e9)), LD::splat(0.0));
+        const I t = __builtin_convertvector(c, I);
+        return t - (__builtin_convertvector(t, D) < c);  // (true is -1)
+      };
+      const I rx = radius(pl.extent[0]), ry = radius(pl.extent[1]);
+      I lo_idx, hi_idx;
+      for (int l = 0; l < L; ++l) {
+        lo_idx[l] = l / 2 + (l % 2) * L;
+        hi_idx[l] = L / 2 + l / 2 + (l % 2) * L;
+      }
+      const I r_lo = __builtin_shuffle(rx, ry, lo_idx), r_hi = __builtin_shuffle(rx, ry, hi_idx);
+      const I w_lo = __builtin_shuffle(written, written, lo_idx - ((lo_idx >= L) & L));
+      const I w_hi = __builtin_shuffle(written, written, hi_idx - ((hi_idx >= L) & L));
+      I old_lo, old_hi;
+      std::int32_t* r = &radii_[2 * i0];
+      std::memcpy(&old_lo, r, sizeof(I));
+      std::memcpy(&old_hi, r + L, sizeof(I));
+      old_lo = w_lo ? r_lo : old_lo;
+      old_hi = w_hi ? r_hi : old_hi;
+      std::memcpy(r, &old_lo, sizeof(I));
+      std::memcpy(r + L, &old_hi, sizeof(I));
+    }
+    for (int l = 0; l < L; ++l)
+      if (!(hard >> l & 1u)) rects_[i0 + std::size_t(l)] = (shown_bits >> l & 1u) ? rect_of[l] : PixelRect{};
+    if (shown_bits == 0) return;
+    // Depth and the colours of the shown rows.
+    {
+      D d;
+      std::memcpy(&d, &depth_[i0], sizeof d);
+      d = LD::sel(shown, pl.depth, d);
+      std::memcpy(&depth_[i0], &d, sizeof d);
+    }
+    if (count_ == 1) {
+      D c;
+      std::memcpy(&c, &colours_[i0], sizeof c);
+      c = LD::sel(shown, col[0], c);
+      std::memcpy(&colours_[i0], &c, sizeof c);
+    } else {
+      for (int l = 0; l < L; ++l)
+        if (shown_bits >> l & 1u)
+          for (int ch = 0; ch < count_; ++ch) colours_[(i0 + std::size_t(l)) * std::size_t(count_) + std::size_t(ch)] = col[ch][l];
+    }
+    // The splats: their eight float fields transposed into rows, the rectangle after them.
+    static_assert(offsetof(Splat<S>, sigma_cut) == 7 * sizeof(S) && offsetof(Splat<S>, rect) == 8 * sizeof(S));
+    D rows[L] = {};
+    rows[0] = pl.mean2d[0];
+    rows[1] = pl.mean2d[1];
+    rows[2] = pl.conic[0];
+    rows[3] = pl.conic[1];
+    rows[4] = pl.conic[2];
+    rows[5] = pl.opacity;
+    rows[6] = pl.depth;
+    rows[7] = pl.support + LD::splat(1e-3);  // set_sigma_cut
+    detail::transpose_square(rows);
+    for (std::uint32_t bits = shown_bits; bits != 0; bits &= bits - 1) {
+      const int l = std::countr_zero(bits);
+      Splat<S>& sp = splats_[i0 + std::size_t(l)];
+      std::memcpy(static_cast<void*>(&sp), &rows[l], 8 * sizeof(S));  // mx .. sigma_cut
+      sp.rect = rect_of[l];
+    }
   }
 
   BlendInputs<S> blend_inputs() const {
