@@ -230,20 +230,7 @@ namespace {
 
 /// The model with its rows in reverse order.
 GaussianModel<G, float> reversed(const GaussianModel<G, float>& m) {
-  const std::size_t n = m.size();
-  GaussianModel<G, float> r(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    const std::size_t j = n - 1 - i;
-    for (int a = 0; a < 3; ++a) {
-      r.means[3 * i + a] = m.means[3 * j + a];
-      r.log_scales[3 * i + a] = m.log_scales[3 * j + a];
-    }
-    for (int a = 0; a < 4; ++a) r.quats[4 * i + a] = m.quats[4 * j + a];
-    r.opacity_logits[i] = m.opacity_logits[j];
-    for (int c = 0; c < G::bands; ++c)
-      for (int k = 0; k < G::sh_coeffs; ++k) r.sh_at(i, k, c) = m.sh_at(j, k, c);
-  }
-  return r;
+  return rows_moved(m, [n = m.size()](std::size_t i) { return n - 1 - i; });
 }
 
 /// Image and mean gradients (rows put back into the model's order) of a render of `m` and of its

@@ -446,20 +446,7 @@ namespace {
 /// `m` with its rows rotated by r: row i holds the Gaussian of row (i + r) mod n.
 template <class G>
 GaussianModel<G, float> rotated(const GaussianModel<G, float>& m, std::size_t r) {
-  const std::size_t n = m.size();
-  GaussianModel<G, float> out(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    const std::size_t s = (i + r) % n;
-    for (int k = 0; k < 3; ++k) {
-      out.means[3 * i + k] = m.means[3 * s + k];
-      out.log_scales[3 * i + k] = m.log_scales[3 * s + k];
-    }
-    for (int k = 0; k < 4; ++k) out.quats[4 * i + k] = m.quats[4 * s + k];
-    out.opacity_logits[i] = m.opacity_logits[s];
-    for (int ch = 0; ch < G::bands; ++ch)
-      for (int k = 0; k < G::sh_coeffs; ++k) out.sh_at(i, k, ch) = m.sh_at(s, k, ch);
-  }
-  return out;
+  return rows_moved(m, [r, n = m.size()](std::size_t i) { return (i + r) % n; });
 }
 
 }  // namespace
