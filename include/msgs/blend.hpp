@@ -30,13 +30,16 @@ struct Splat {
   PixelRect rect;  ///< pixels that may receive alpha >= 1/255
 };
 
+/// Margin of Splat::sigma_cut over ln(255 o) (set_sigma_cut).
+inline constexpr double kSigmaCutMargin = 1e-3;
+
 /// Sets s.sigma_cut from `support` = ln(255 o) (ProjectedGaussian::support): a conservative bound
 /// past which o e^-sigma < 1/255, so that the blend can skip a block after sigma alone. The 1e-3
-/// margin covers the rounding of s.o, of the exponential and of sigma, so the exact path could only
-/// have rejected those fragments too.
+/// margin (kSigmaCutMargin) covers the rounding of s.o, of the exponential and of sigma, so the
+/// exact path could only have rejected those fragments too.
 template <class S>
 inline void set_sigma_cut(Splat<S>& s, double support) {
-  s.sigma_cut = S(support) + S(1e-3);
+  s.sigma_cut = S(support) + S(kSigmaCutMargin);
 }
 
 /// Tile-list entries a blend loop takes at once (a batch, see detail::BlendBatch). While it works

@@ -8,6 +8,7 @@
 #include <bit>
 #include <chrono>
 #include <cmath>
+#include <cstddef>
 #include <cstdint>
 #include <cstring>
 #include <limits>
@@ -682,7 +683,7 @@ class Rasterizer {
     rows[4] = pl.conic[2];
     rows[5] = pl.opacity;
     rows[6] = pl.depth;
-    rows[7] = pl.support + LD::splat(1e-3);  // set_sigma_cut
+    rows[7] = pl.support + LD::splat(kSigmaCutMargin);  // set_sigma_cut, a lane at a time
     detail::transpose_square(rows);
     for (std::uint32_t bits = shown_bits; bits != 0; bits &= bits - 1) {
       const int l = std::countr_zero(bits);
