@@ -642,8 +642,7 @@ class Rasterizer {
         hi_idx[l] = L / 2 + l / 2 + (l % 2) * L;
       }
       const I r_lo = __builtin_shuffle(rx, ry, lo_idx), r_hi = __builtin_shuffle(rx, ry, hi_idx);
-      const I w_lo = __builtin_shuffle(written, written, lo_idx - ((lo_idx >= L) & L));
-      const I w_hi = __builtin_shuffle(written, written, hi_idx - ((hi_idx >= L) & L));
+      const I w_lo = __builtin_shuffle(written, written, lo_idx), w_hi = __builtin_shuffle(written, written, hi_idx);
       I old_lo, old_hi;
       std::int32_t* r = &radii_[2 * i0];
       std::memcpy(&old_lo, r, sizeof(I));
