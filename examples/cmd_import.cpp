@@ -49,9 +49,9 @@ constexpr const char* kUsage =
     "usage: msgs import --images DIR --out DIR [--camera auto|micasense|dji|sequoia]\n"
     "                   [--bands PATTERN=ID,...] [--eval-every N] [--camera-model M]\n"
     "                   [--radiometry auto|none] [--matching exhaustive|window|gps]\n"
-    "                   [--window N] [--neighbours K] [--ba-tolerance X] [--merge-models on|off]\n"
-    "                   [--rig on|off] [--allow-partial] [--force] [--colmap BIN] [--exiv2 BIN]\n"
-    "                   [--keep-work]\n"
+    "                   [--window N] [--neighbours K] [--sift-threshold T] [--ba-tolerance X]\n"
+    "                   [--merge-models on|off] [--rig on|off] [--allow-partial] [--force]\n"
+    "                   [--colmap BIN] [--exiv2 BIN] [--keep-work]\n"
     "\n"
     "Turn a folder of raw multi-band captures into the multi-spectral dataset layout (transforms.json,\n"
     "train_split.json, images/, sparse_pc.ply) that `msgs train` reads.\n"
@@ -66,13 +66,14 @@ constexpr const char* kUsage =
     "     tags are missing are left out for that band, with a warning naming the files.\n"
     "  3. Poses with COLMAP on the CPU (feature_extractor with one camera per band and the focal\n"
     "     length from the metadata as prior; matching of every pair, of nearby captures by GPS or\n"
-    "     of a window of captures; mapper) on 8-bit copies; the largest model is the main one. Every\n"
-    "     image must register or be posed by steps 4 and 5 (else an error names the ones that did not).\n"
+    "     of a window of captures; mapper) on contrast-stretched 8-bit copies; the largest model\n"
+    "     is the main one. Every image must register or be posed by steps 4 and 5 (else an error\n"
+    "     names the ones that did not).\n"
     "  4. Models of the rest: a band that matches its own images but not the other bands makes no\n"
-    "     part of the main model. The mapper runs once more on the images the main model lacks, and\n"
-    "     each model it makes is carried into the main model's frame by the similarity that maps\n"
-    "     its capture centres onto the main model's (at least 3 shared captures, within 0.15 of the\n"
-    "     capture spacing, not all along one line; captures that disagree are left out).\n"
+    "     part of the main model. The mapper's other models, then a second run of it on the images\n"
+    "     still without a pose, are each carried into the main model's frame by the similarity that\n"
+    "     maps their capture centres onto the main model's (at least 3 shared captures, within 0.15\n"
+    "     of the capture spacing, not all along one line; captures that disagree are left out).\n"
     "  5. The rig: the lenses of a multi-band camera fire together from fixed mounts, so an image\n"
     "     COLMAP did not register (matching across bands is hard) is placed through a band of its\n"
     "     own capture that registered, with the bands' offset measured on the captures where both\n"
@@ -89,7 +90,8 @@ constexpr const char* kUsage =
     "                      e.g. --bands 'IMG_*_2.tif=MS_G,IMG_*_3.tif=MS_R,IMG_*_5.tif=MS_RE,IMG_*_4.tif=MS_NIR'\n"
     "  --eval-every N      every N-th capture (all its bands) goes to eval (default 10; 0: none)\n"
     "  --camera-model M    COLMAP camera model: OPENCV (default), PINHOLE, SIMPLE_RADIAL, RADIAL\n"
-    "  --radiometry R      auto (default: use the metadata) or none (keep the stored values)\n"
+    "  --radiometry R      auto (default: use the metadata) or none (keep the stored values; the\n"
+    "                      focal lengths in the metadata are still COLMAP's priors)\n"
     "  --matching M        image pairs COLMAP matches: exhaustive (default: every pair; the time\n"
     "                      grows with the square of the image count), window (the bands of a\n"
     "                      capture with each other, and each band with the same band of the next\n"
@@ -102,6 +104,9 @@ constexpr const char* kUsage =
     "                      ground is in about 4 to 6 consecutive captures at 75-80% forward overlap)\n"
     "  --neighbours K      nearest captures that gps matching pairs each capture with (default 12:\n"
     "                      about 5 along a survey line times 3 across at 75% / 65% overlap)\n"
+    "  --sift-threshold T  SIFT's peak threshold on the 8-bit copies COLMAP matches (default\n"
+    "                      0.0067, COLMAP's own; lower finds more features in low-contrast bands:\n"
+    "                      try 0.003 when a band's images do not register)\n"
     "  --ba-tolerance X    relative change of the cost at which COLMAP's mapper ends a global\n"
     "                      bundle adjustment (default 1e-6, as 3DGS's convert.py: on a 240-image\n"
     "                      flight 2.3-4.6x faster than 0, COLMAP's own default, which runs each\n"
@@ -352,9 +357,10 @@ RigResult place_unregistered(const std::vector<Item>& items, std::size_t capture
   return r;
 }
 
-/// Models of the images the main model lacks (step 4 of the usage): the mapper once more, on those
-/// images alone, and each model it makes carried into the main model's frame through the
-/// captures both hold (msgs/io/model_alignment.hpp).
+/// Models of the images the main model lacks (step 4 of the usage): first the other models COLMAP's
+/// first mapper run made, then the mapper once more on the images still without a pose; each model
+/// carried into the main model's frame through the captures both hold
+/// (msgs/io/model_alignment.hpp).
 struct MergeResult {
   std::vector<msgs::io::ColmapImage> images;  ///< carried over, posed in the main frame
   msgs::io::PointCloud points;                ///< the carried models' points, in the main frame
@@ -364,24 +370,123 @@ struct MergeResult {
   double seconds = 0;
 };
 
+/// A model COLMAP's mapper wrote, and its folder.
+struct MapperModel {
+  fs::path dir;
+  msgs::io::ColmapModel model;
+};
+
+/// Models in COLMAP's numbered folders under `dir`, largest first (ties in folder order).
+std::vector<MapperModel> read_models(const fs::path& dir) {
+  std::error_code ec;
+  std::vector<fs::path> dirs;
+  for (const auto& e : fs::directory_iterator(dir, ec))
+    if (e.is_directory()) dirs.push_back(e.path());
+  std::sort(dirs.begin(), dirs.end());
+  std::vector<MapperModel> models;
+  for (const fs::path& d : dirs) models.push_back({d, msgs::io::read_colmap(d)});
+  std::stable_sort(models.begin(), models.end(),
+                   [](const auto& a, const auto& b) { return a.model.images.size() > b.model.images.size(); });
+  return models;
+}
+
 MergeResult merge_rest_models(const std::vector<Item>& items, std::size_t captures,
                               const std::map<std::string, const msgs::io::ColmapImage*>& registered,
-                              const std::string& colmap, const fs::path& work, const fs::path& log,
-                              const std::string& ba_tolerance) {
+                              const std::vector<MapperModel>& first_run_others, const std::string& colmap,
+                              const fs::path& work, const fs::path& log, const std::string& ba_tolerance) {
   MergeResult r;
+  r.report = nlohmann::ordered_json::array();
   const msgs::io::AlignTolerance tol;
   std::map<std::string, const Item*> item_of;
-  std::vector<const Item*> rest;
-  std::set<std::size_t> rest_captures, main_captures;
+  std::set<std::size_t> main_captures;
   for (const Item& it : items) {
     item_of[it.colmap_name] = &it;
-    if (registered.count(it.colmap_name)) {
-      main_captures.insert(it.capture);
-      continue;
-    }
-    rest.push_back(&it);
-    rest_captures.insert(it.capture);
+    if (registered.count(it.colmap_name)) main_captures.insert(it.capture);
   }
+  std::set<std::string> taken;  // a model tried later never overrides an earlier one
+  // The import's item of a model's image that still needs a pose; nullptr otherwise.
+  const auto needing_pose = [&](const std::string& name) -> const Item* {
+    const auto it = item_of.find(name);
+    return it == item_of.end() || registered.count(name) || taken.count(name) ? nullptr : it->second;
+  };
+  std::vector<std::pair<std::size_t, msgs::io::RigPose>> main_cameras;
+  for (const auto& [name, im] : registered)
+    if (const auto it = item_of.find(name); it != item_of.end()) main_cameras.emplace_back(it->second->capture, pose_of(*im));
+  const msgs::io::CaptureCentres main_centres = msgs::io::capture_centres(main_cameras, captures);
+
+  const auto carry = [&](const msgs::io::ColmapModel& m) {
+    std::vector<std::pair<std::size_t, msgs::io::RigPose>> cameras;
+    std::map<std::string, int> bands;
+    for (const auto& im : m.images)
+      if (const Item* item = needing_pose(im.name)) {
+        cameras.emplace_back(item->capture, pose_of(im));
+        ++bands[item->band];
+      }
+    if (cameras.empty()) return;
+    std::string band_list;
+    for (const auto& [b, n] : bands) band_list += cat(band_list.empty() ? "" : ", ", b, " ", n);
+    const msgs::io::ModelAlignment a =
+        msgs::io::align_by_captures(main_centres, msgs::io::capture_centres(cameras, captures), tol);
+    nlohmann::ordered_json j;
+    j["images"] = cameras.size();
+    j["bands"] = bands;
+    j["shared_captures"] = a.shared;
+    j["agreeing"] = a.agreeing;
+    const std::string what = cat("a model of ", cameras.size(), " images (", band_list, ")");
+    if (!a.to_main) {
+      j["problem"] = a.problem;
+      r.report.push_back(j);
+      r.problems.push_back(cat(what, " ", a.problem));
+      return;
+    }
+    j["median_residual_of_spacing"] = a.median_residual;
+    j["max_residual_of_spacing"] = a.max_residual;
+    j["scale"] = a.to_main->scale;
+    const std::set<std::size_t> disagreeing(a.disagreeing.begin(), a.disagreeing.end());
+    std::size_t carried = 0, left = 0;
+    for (const auto& im : m.images) {
+      const Item* item = needing_pose(im.name);
+      if (!item) continue;
+      if (disagreeing.count(item->capture)) {
+        ++left;  // registered elsewhere in this model than in the main one
+        continue;
+      }
+      msgs::io::ColmapImage c = im;
+      const msgs::io::RigPose p = msgs::io::pose_in_main_frame(pose_of(im), *a.to_main);
+      c.id = 0;
+      c.camera.R = p.R.cast<float>();
+      c.camera.t = p.t.cast<float>();
+      r.images.push_back(c);
+      r.from[im.name] = cat("colmap, model of the rest aligned by ", a.agreeing, " captures");
+      taken.insert(im.name);
+      ++carried;
+    }
+    j["carried"] = carried;
+    j["left_disagreeing"] = left;
+    r.report.push_back(j);
+    for (std::size_t i = 0; i < m.points.size(); ++i) {
+      const Eigen::Vector3d x = (*a.to_main)(Eigen::Vector3d(m.points.xyz[3 * i], m.points.xyz[3 * i + 1], m.points.xyz[3 * i + 2]));
+      for (int d = 0; d < 3; ++d) r.points.xyz.push_back(float(x[d]));
+      for (int d = 0; d < 3 && m.points.has_colour(); ++d) r.points.rgb.push_back(m.points.rgb[3 * i + std::size_t(d)]);
+    }
+    char fit[128];
+    std::snprintf(fit, sizeof fit, "within %.3f of the capture spacing (median %.3f)", a.max_residual, a.median_residual);
+    std::printf("  carried %zu images of %s into the main model, aligned by %zu of %zu shared captures %s%s\n", carried,
+                what.c_str(), a.agreeing, a.shared, fit,
+                left ? cat("; ", left, " left out (their captures disagree)").c_str() : "");
+  };
+  // 1. The first run's other models: the mapper often already made the model of the bands the
+  // main one lacks, and a second run on them alone can fail to start one.
+  for (const auto& m : first_run_others) carry(m.model);
+
+  // 2. The mapper on the images still without a pose.
+  std::vector<const Item*> rest;
+  std::set<std::size_t> rest_captures;
+  for (const Item& it : items)
+    if (needing_pose(it.colmap_name)) {
+      rest.push_back(&it);
+      rest_captures.insert(it.capture);
+    }
   // A model of fewer captures could not be aligned: those images are the rig's.
   if (rest_captures.size() < tol.min_captures) return r;
   // Only a capture with images on both sides can be in the main model and in a model of the rest:
@@ -413,94 +518,16 @@ MergeResult merge_rest_models(const std::vector<Item>& items, std::size_t captur
     r.problems.push_back(cat("the mapper made no model of the ", rest.size(), " images the main model lacks"));
     return r;
   }
-  std::vector<fs::path> dirs;  // COLMAP's numbered model folders, in name order (then by size below)
-  for (const auto& e : fs::directory_iterator(out, ec))
-    if (e.is_directory()) dirs.push_back(e.path());
-  std::sort(dirs.begin(), dirs.end());
-  std::vector<msgs::io::ColmapModel> models;
-  for (const fs::path& d : dirs) models.push_back(msgs::io::read_colmap(d));
-  std::stable_sort(models.begin(), models.end(), [](const auto& a, const auto& b) { return a.images.size() > b.images.size(); });
+  const std::vector<MapperModel> models = read_models(out);
   if (models.empty()) r.problems.push_back(cat("the mapper made no model of the ", rest.size(), " images the main model lacks"));
-
-  std::vector<std::pair<std::size_t, msgs::io::RigPose>> main_cameras;
-  for (const auto& [name, im] : registered)
-    if (const auto it = item_of.find(name); it != item_of.end()) main_cameras.emplace_back(it->second->capture, pose_of(*im));
-  const msgs::io::CaptureCentres main_centres = msgs::io::capture_centres(main_cameras, captures);
-  std::set<std::string> taken;  // a model made later never overrides an earlier one
-  // The import's item of a model's image that still needs a pose; nullptr otherwise.
-  const auto needing_pose = [&](const msgs::io::ColmapImage& im) -> const Item* {
-    const auto it = item_of.find(im.name);
-    return it == item_of.end() || registered.count(im.name) || taken.count(im.name) ? nullptr : it->second;
-  };
-  r.report = nlohmann::ordered_json::array();
-  for (std::size_t k = 0; k < models.size(); ++k) {
-    const msgs::io::ColmapModel& m = models[k];
-    std::vector<std::pair<std::size_t, msgs::io::RigPose>> cameras;
-    std::map<std::string, int> bands;
-    for (const auto& im : m.images)
-      if (const Item* item = needing_pose(im)) {
-        cameras.emplace_back(item->capture, pose_of(im));
-        ++bands[item->band];
-      }
-    std::string band_list;
-    for (const auto& [b, n] : bands) band_list += cat(band_list.empty() ? "" : ", ", b, " ", n);
-    const msgs::io::ModelAlignment a =
-        msgs::io::align_by_captures(main_centres, msgs::io::capture_centres(cameras, captures), tol);
-    nlohmann::ordered_json j;
-    j["images"] = cameras.size();
-    j["bands"] = bands;
-    j["shared_captures"] = a.shared;
-    j["agreeing"] = a.agreeing;
-    const std::string what = cat("a model of ", cameras.size(), " images (", band_list, ")");
-    if (!a.to_main) {
-      j["problem"] = a.problem;
-      r.report.push_back(j);
-      r.problems.push_back(cat(what, " ", a.problem));
-      continue;
-    }
-    j["median_residual_of_spacing"] = a.median_residual;
-    j["max_residual_of_spacing"] = a.max_residual;
-    j["scale"] = a.to_main->scale;
-    const std::set<std::size_t> disagreeing(a.disagreeing.begin(), a.disagreeing.end());
-    std::size_t carried = 0, left = 0;
-    for (const auto& im : m.images) {
-      const Item* item = needing_pose(im);
-      if (!item) continue;
-      if (disagreeing.count(item->capture)) {
-        ++left;  // registered elsewhere in this model than in the main one
-        continue;
-      }
-      msgs::io::ColmapImage c = im;
-      const msgs::io::RigPose p = msgs::io::pose_in_main_frame(pose_of(im), *a.to_main);
-      c.id = 0;
-      c.camera.R = p.R.cast<float>();
-      c.camera.t = p.t.cast<float>();
-      r.images.push_back(c);
-      r.from[im.name] = cat("colmap, model of the rest aligned by ", a.agreeing, " captures");
-      taken.insert(im.name);
-      ++carried;
-    }
-    j["carried"] = carried;
-    j["left_disagreeing"] = left;
-    r.report.push_back(j);
-    for (std::size_t i = 0; i < m.points.size(); ++i) {
-      const Eigen::Vector3d x = (*a.to_main)(Eigen::Vector3d(m.points.xyz[3 * i], m.points.xyz[3 * i + 1], m.points.xyz[3 * i + 2]));
-      for (int d = 0; d < 3; ++d) r.points.xyz.push_back(float(x[d]));
-      for (int d = 0; d < 3 && m.points.has_colour(); ++d) r.points.rgb.push_back(m.points.rgb[3 * i + std::size_t(d)]);
-    }
-    char fit[128];
-    std::snprintf(fit, sizeof fit, "within %.3f of the capture spacing (median %.3f)", a.max_residual, a.median_residual);
-    std::printf("  carried %zu images of %s into the main model, aligned by %zu of %zu shared captures %s%s\n", carried,
-                what.c_str(), a.agreeing, a.shared, fit,
-                left ? cat("; ", left, " left out (their captures disagree)").c_str() : "");
-  }
+  for (const auto& m : models) carry(m.model);
   return r;
 }
 
 int run_import(const std::vector<std::string>& argv) {
   const msgs::cli::Args args(argv,
                              {"images", "out", "camera", "bands", "eval-every", "camera-model", "radiometry", "matching", "window",
-                              "neighbours", "ba-tolerance", "merge-models", "rig", "colmap", "exiv2"},
+                              "neighbours", "sift-threshold", "ba-tolerance", "merge-models", "rig", "colmap", "exiv2"},
                              {"force", "allow-partial", "keep-work", "help"});
   if (args.flag("help")) {
     std::fputs(kUsage, stdout);
@@ -538,6 +565,9 @@ int run_import(const std::vector<std::string>& argv) {
   if (window < 1) throw msgs::cli::UsageError("--window expects a positive number of captures");
   const long neighbours = args.integer("neighbours", 12);
   if (neighbours < 1) throw msgs::cli::UsageError("--neighbours expects a positive number of captures");
+  const double sift_threshold = args.number("sift-threshold", 0.02 / 3);
+  if (!(sift_threshold > 0 && sift_threshold < 1))
+    throw msgs::cli::UsageError("--sift-threshold expects a contrast in (0, 1), e.g. 0.004");
   const double ba_tolerance = args.number("ba-tolerance", 1e-6);
   if (!(ba_tolerance >= 0 && ba_tolerance < 1))
     throw msgs::cli::UsageError("--ba-tolerance expects a relative change in [0, 1), e.g. 1e-6 or 0");
@@ -628,17 +658,20 @@ int run_import(const std::vector<std::string>& argv) {
   if (args.flag("keep-work")) stage.keep();
   const fs::path log = work / "colmap.log";
 
-  // ---- 2. metadata (exiv2)
+  // ---- 2. metadata (exiv2): radiometry, GPS positions and the focal lengths COLMAP starts from
   const auto t_meta = Clock::now();
   bool have_meta = false;
-  if (radiometry == "auto" || matching == "gps") {
+  {
     const std::string exiv2_arg = args.get("exiv2", "exiv2");
+    // Without exiv2 the import still runs (stored values, guessed focal lengths) unless it needs
+    // the positions.
     if (!msgs::cli::find_program(exiv2_arg)) {
       if (matching == "gps")
         fail(exiv2_arg, "--matching gps reads the positions with exiv2, which was not found (install it: "
                         "apt-get install exiv2, or point --exiv2 at it)");
-      std::printf("  warning: exiv2 not found (install it: apt-get install exiv2); keeping the stored values "
-                  "(no radiometric normalisation)\n");
+      std::printf("  warning: exiv2 not found (install it: apt-get install exiv2); keeping the stored values%s "
+                  "and letting COLMAP guess the focal lengths\n",
+                  radiometry == "auto" ? " (no radiometric normalisation)" : "");
     } else {
       have_meta = true;
       const std::size_t batch = 64;
@@ -659,7 +692,8 @@ int run_import(const std::vector<std::string>& argv) {
         // exiv2 exits non-zero when a file has none of the keys; only a missing output is an error.
         const std::string text = fs::exists(txt, ec) ? msgs::io::read_text(txt) : std::string();
         if (rc != 0 && text.empty() && rc != 1 && rc != 253)
-          throw msgs::io::IoError(cat(exiv2_arg, " failed with exit status ", rc, " (--radiometry none skips it):\n",
+          throw msgs::io::IoError(cat(exiv2_arg, " failed with exit status ", rc,
+                                      " (a broken install? point --exiv2 at a working one):\n",
                                       msgs::cli::tail_lines(work / "exiv2.log", 10)));
         const auto per_file = msgs::io::split_exiv2_output(text, names);
         for (std::size_t i = i0; i < i1; ++i) items[i].meta = msgs::io::parse_capture_meta(per_file[i - i0], images / items[i].source);
@@ -738,6 +772,8 @@ int run_import(const std::vector<std::string>& argv) {
   std::map<std::string, double> timings;
   const std::string db = (work / "database.db").string();
   double t_features = 0.0;
+  char peak[32];
+  std::snprintf(peak, sizeof peak, "%.17g", sift_threshold);
   for (const auto& [band, idx] : by_band) {
     const fs::path list = work / cat("list_", band, ".txt");
     std::string text;
@@ -745,7 +781,7 @@ int run_import(const std::vector<std::string>& argv) {
     msgs::io::write_text_atomic(list, text);
     std::vector<std::string> a = {"--database_path", db, "--image_path", (work / "images").string(), "--image_list_path",
                                   list.string(), "--ImageReader.single_camera", "1", "--ImageReader.camera_model", model,
-                                  "--SiftExtraction.use_gpu", "0"};
+                                  "--SiftExtraction.use_gpu", "0", "--SiftExtraction.peak_threshold", peak};
     // Focal length prior from the metadata: median over the band's images of mm x pixels/mm.
     std::vector<double> f;
     for (std::size_t i : idx)
@@ -812,28 +848,21 @@ int run_import(const std::vector<std::string>& argv) {
                                   log, items.size());
 
   // ---- 5. the largest model, registration check
-  fs::path best_dir;
-  msgs::io::ColmapModel best;
-  int n_models = 0;
-  for (const auto& e : fs::directory_iterator(work / "sparse", ec)) {
-    if (!e.is_directory()) continue;
-    msgs::io::ColmapModel m = msgs::io::read_colmap(e.path());
-    ++n_models;
-    if (best_dir.empty() || m.images.size() > best.images.size()) {
-      best = std::move(m);
-      best_dir = e.path();
-    }
-  }
-  if (best_dir.empty())
+  std::vector<MapperModel> models = read_models(work / "sparse");
+  const int n_models = int(models.size());
+  if (models.empty())
     throw msgs::io::IoError(cat("COLMAP's mapper reconstructed nothing (too few matches between the images?); ",
                                 "last lines of its log:\n", msgs::cli::tail_lines(log, 15)));
+  const fs::path best_dir = models.front().dir;
+  const msgs::io::ColmapModel best = std::move(models.front().model);
+  models.erase(models.begin());
   std::map<std::string, const msgs::io::ColmapImage*> registered;
   for (const auto& im : best.images) registered[im.name] = &im;
   if (n_models > 1)
     std::printf("  warning: COLMAP made %d separate models; keeping the largest (%zu images)\n", n_models, best.images.size());
   MergeResult merged;
   if (merge_mode == "on" && registered.size() < items.size()) {
-    merged = merge_rest_models(items, scan.captures.size(), registered, colmap->string(), work, log, tolerance);
+    merged = merge_rest_models(items, scan.captures.size(), registered, models, colmap->string(), work, log, tolerance);
     timings["mapping"] += merged.seconds;
     for (const auto& im : merged.images) registered[im.name] = &im;
   }
@@ -893,6 +922,7 @@ int run_import(const std::vector<std::string>& argv) {
   meta_json["images"] = items.size();
   meta_json["mean_reprojection_error_px"] = opt_number(reproj);
   meta_json["colmap_camera_model"] = model;
+  meta_json["colmap_sift_peak_threshold"] = sift_threshold;
   meta_json["colmap_ba_global_function_tolerance"] = ba_tolerance;
   meta_json["colmap_matching"] = matching == "window" ? cat("window ", window)
                                   : matching == "gps"  ? cat("gps ", neighbours, " nearest")
