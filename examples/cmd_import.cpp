@@ -394,8 +394,7 @@ MergeResult merge_rest_models(const std::vector<Item>& items, std::size_t captur
                               const std::map<std::string, const msgs::io::ColmapImage*>& registered,
                               const std::vector<MapperModel>& first_run_others, const std::string& colmap,
                               const fs::path& work, const fs::path& log, const std::string& ba_tolerance) {
-  MergeResult r;
-  r.report = nlohmann::ordered_json::array();
+  MergeResult r;  // r.report stays null until a model is tried
   const msgs::io::AlignTolerance tol;
   std::map<std::string, const Item*> item_of;
   std::set<std::size_t> main_captures;
