@@ -199,6 +199,20 @@ TEST_CASE("point clouds: ASCII and binary, with and without colour") {
   CHECK(info.vertices == 3);
 }
 
+TEST_CASE("binary PLY: an element without properties holds no bytes, however many entries it declares") {
+  // Found by fuzz_ply: such an element's entries took a pass of the chunked reader per 4096, so a
+  // count of 1e15 never finished.
+  const auto dir = scratch("empty_element");
+  const float v[3] = {1.0f, 2.0f, 3.0f};
+  std::string data(sizeof v, '\0');
+  std::memcpy(data.data(), v, sizeof v);
+  write_text(dir / "a.ply",
+             "ply\nformat binary_little_endian 1.0\nelement marker 1000000000000000\nelement vertex 1\n"
+             "property float x\nproperty float y\nproperty float z\nend_header\n" + data);
+  const auto a = read_point_cloud(dir / "a.ply");
+  CHECK(a.xyz == std::vector<float>{1, 2, 3});
+}
+
 TEST_CASE("bad PLY: truncated binary model") {
   const auto dir = scratch("trunc");
   write_ply(dir / "m.ply", random_model<Gaussian<3, 1>>(10, 3));

@@ -300,6 +300,7 @@ inline std::vector<float> read_vertex_columns(std::istream& in, const PlyHeader&
       fixed = fixed && !pr.is_list;
       stride += ply_type_size(pr.type);
     }
+    if (fixed && stride == 0) continue;  // no properties: its entries hold no bytes, however many
     if (fixed) {
       // Whole rows in chunks: the common case, and the only one for Gaussian models.
       constexpr std::size_t chunk_rows = 4096;
