@@ -12,6 +12,8 @@
 #include <msgs/run.hpp>
 #include <msgs/snapshot.hpp>
 
+#include "run_experiment_sh0.hpp"  // run_experiment<0>, compiled once for the tests that run it
+
 #include <atomic>
 #include <chrono>
 #include <cmath>

@@ -19,6 +19,8 @@
 #include <msgs/run.hpp>
 #include <msgs/study.hpp>
 
+#include "run_experiment_sh0.hpp"  // run_experiment<0>, compiled once for the tests that run it
+
 #include "../examples/study_convergence.hpp"  // the tool side: curves of the convergence study
 #include "../examples/study_report.hpp"       // the tool side: summaries, tables, job files
 #include <msgs/synth.hpp>

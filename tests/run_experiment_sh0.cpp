@@ -1,0 +1,7 @@
+// tests/run_experiment_sh0.cpp: the one instantiation of run_experiment<0> that the tests share
+// (see run_experiment_sh0.hpp).
+#include "run_experiment_sh0.hpp"
+
+namespace msgs {
+template RunResult run_experiment<0>(const io::Dataset&, const RunConfig&, const std::filesystem::path&);
+}  // namespace msgs
