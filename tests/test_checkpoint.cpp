@@ -17,7 +17,9 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <string>
+#include <tuple>
 
 #include <omp.h>
 
@@ -88,46 +90,51 @@ TrainState<G> interrupted_and_resumed(const std::string& name, bool sparse, int 
   return second.state(kEnd);
 }
 
+/// The end state of an uninterrupted run to kEnd (sparse or dense Adam, reorder_every `reorder`)
+/// on omp_get_max_threads() threads. The cases compare several checks against the same runs, and
+/// a run takes seconds (a minute under the sanitizers), so each is trained once per process.
+const TrainState<G>& straight_run(bool sparse, int reorder) {
+  static std::map<std::tuple<bool, int, int>, TrainState<G>> done;
+  const auto key = std::make_tuple(sparse, reorder, omp_get_max_threads());
+  if (const auto it = done.find(key); it != done.end()) return it->second;
+  Trainer<G> t = make_trainer({}, sparse, reorder);
+  REQUIRE(t.train(0, kEnd) == kEnd);
+  return done.emplace(key, t.state(kEnd)).first->second;
+}
+
 }  // namespace
 
 TEST_CASE("a resumed run equals the uninterrupted run bit for bit, with sparse and with dense Adam") {
   for (const bool sparse : {true, false}) {
     INFO("sparse ", sparse);
-    Trainer<G> straight = make_trainer({}, sparse);
-    REQUIRE(straight.train(0, kEnd) == kEnd);
-    check_same(interrupted_and_resumed("joint.ckpt", sparse, 0), straight.state(kEnd));
+    check_same(interrupted_and_resumed("joint.ckpt", sparse, 0), straight_run(sparse, 0));
   }
 }
 
 TEST_CASE("training is bit-identical for 1 and 2 threads, sparse and dense; the two modes differ") {
   const int saved = omp_get_max_threads();
-  std::vector<TrainState<G>> ends;
+  std::vector<const TrainState<G>*> ends;
   for (const bool sparse : {true, false}) {
     INFO("sparse ", sparse);
     omp_set_num_threads(1);
-    Trainer<G> one = make_trainer({}, sparse);
-    one.train(0, 150);
+    const TrainState<G>& one = straight_run(sparse, 0);
     omp_set_num_threads(2);
-    Trainer<G> two = make_trainer({}, sparse);
-    two.train(0, 150);
-    check_same(one.state(150), two.state(150));
-    ends.push_back(two.state(150));
+    const TrainState<G>& two = straight_run(sparse, 0);
+    check_same(one, two);
+    ends.push_back(&two);
   }
   omp_set_num_threads(saved);
-  CHECK_FALSE(same_bits(ends[0].model.means, ends[1].model.means));
+  CHECK_FALSE(same_bits(ends[0]->model.means, ends[1]->model.means));
 }
 
 TEST_CASE("with spatial reordering a resumed run equals the uninterrupted one, and 1 and 2 threads agree") {
   constexpr int kReorder = 2;  // every second refinement: a sort every 12 steps
   const int saved = omp_get_max_threads();
   omp_set_num_threads(1);
-  Trainer<G> one = make_trainer({}, false, kReorder);
-  REQUIRE(one.train(0, kEnd) == kEnd);
+  const TrainState<G>& one = straight_run(false, kReorder);
   omp_set_num_threads(2);
-  Trainer<G> straight = make_trainer({}, false, kReorder);
-  REQUIRE(straight.train(0, kEnd) == kEnd);
-  const TrainState<G> want = straight.state(kEnd);
-  check_same(one.state(kEnd), want);
+  const TrainState<G>& want = straight_run(false, kReorder);
+  check_same(one, want);
 
   check_same(interrupted_and_resumed("reordered.ckpt", false, kReorder), want);
   omp_set_num_threads(saved);
@@ -138,9 +145,7 @@ TEST_CASE("with spatial reordering a resumed run equals the uninterrupted one, a
     for (std::size_t i = 1; i < c.size(); ++i) d += c[i] < c[i - 1];
     return d;
   };
-  Trainer<G> plain = make_trainer({}, false, 0);
-  plain.train(0, kEnd);
-  const std::size_t sorted_d = descents(want.model), plain_d = descents(plain.state(kEnd).model);
+  const std::size_t sorted_d = descents(want.model), plain_d = descents(straight_run(false, 0).model);
   INFO("descents: reordered ", sorted_d, ", gsplat order ", plain_d, " of ", want.model.size());
   CHECK(plain_d > 4 * sorted_d);
 }
@@ -207,11 +212,8 @@ TEST_CASE("spatial reordering moves rows only: the run holds the same Gaussians 
   // depends on where a row is, so sorting changes the order of the rows and nothing else.
   for (const bool sparse : {false, true}) {
     INFO("sparse ", sparse);
-    Trainer<G> plain = make_trainer({}, sparse, 0);
-    REQUIRE(plain.train(0, kEnd) == kEnd);
-    Trainer<G> sorted = make_trainer({}, sparse, 2);
-    REQUIRE(sorted.train(0, kEnd) == kEnd);
-    const TrainState<G> a = plain.state(kEnd), b = sorted.state(kEnd);
+    const TrainState<G>& a = straight_run(sparse, 0);
+    const TrainState<G>& b = straight_run(sparse, 2);
     REQUIRE(a.model.size() == b.model.size());
     CHECK_FALSE(same_bits(a.model.means, b.model.means));  // the rows did move
     check_same(gathered(a, canonical_rows(a)), gathered(b, canonical_rows(b)));
