@@ -19,9 +19,9 @@ cmake --build "$prefix/build" -j "$jobs" >/dev/null
 # its own build directory, without benchmarks and examples. Any report fails the run: UBSan is
 # built with -fno-sanitize-recover, ASan halts on the first error, LeakSanitizer is on (it works
 # in this container; set MSGS_ASAN_LEAKS=0 where ptrace restrictions stop it). -Og -g1 puts
-# file:line in every report; with the sanitizers it compiles much faster than -O1 (this pass's
-# build: 9.7 instead of 15.2 minutes on the 2-core CI machine, 2026-11-29) for tests that run
-# about 20% longer (4.6 minutes).
+# file:line in every report; with the sanitizers it compiles about twice as fast as -O1 (this
+# pass's build: 7 instead of 15.2 minutes on a 2-core Sapphire Rapids VM, 2026-11-29) for tests
+# that run about 20% longer (3.7 minutes there).
 # Passive OpenMP waiting: spinning workers of two parallel tests on two cores made the sanitized
 # rasterizer tests 5x slower. Every test runs here; MSGS_SANITIZE_EXCLUDE takes a ctest -E regex
 # to leave some out, MSGS_SKIP_SANITIZE=1 skips this pass.
