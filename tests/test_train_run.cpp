@@ -7,9 +7,9 @@
 #include "fixtures.hpp"
 
 #include <msgs/run.hpp>
+#include <msgs/synth.hpp>
 
 #include "run_experiment_sh0.hpp"  // run_experiment<0>, compiled once for the tests that run it
-#include <msgs/synth.hpp>
 
 #include <atomic>
 #include <cmath>
