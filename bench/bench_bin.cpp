@@ -2,13 +2,13 @@
 // Stage 2 of the rasteriser alone: bin_gaussians (depth sort, tile count, tile scatter) on a frame
 // shaped like the demo's (240x180, 82k Gaussians of which about 60% visible, splats of 1 to 4
 // tiles: about 1.7 pairs each) and on a larger one (1280x960, 1M Gaussians). Uses the public API
-// only (pixel_rect, bin_gaussians), so the same file builds against older headers for a
-// side-by-side run. Reports splats/s (visible Gaussians binned per second) and pairs.
+// only (pixel_rect, bin_gaussians, and for BM_BinTiesByMean TiesByMean, in bin.hpp since
+// 2026-11-30), so BM_Bin builds against older headers for a side-by-side run. Reports splats/s
+// (visible Gaussians binned per second) and pairs.
 //   ./build/bench/bench_bin --benchmark_min_time=0.5
 #include <benchmark/benchmark.h>
 
 #include <cstdint>
-#include <cstring>
 #include <random>
 #include <vector>
 
@@ -57,28 +57,9 @@ void BM_Bin(benchmark::State& st) {
 }
 BENCHMARK(BM_Bin)->ArgName("large")->Arg(0)->Arg(1)->UseRealTime()->Unit(benchmark::kMicrosecond);
 
-/// A tie key like the rasteriser's (`RasterOptions::ties_by_mean`): the bits of a Gaussian's mean,
-/// read from a model-sized array at the rows of the Gaussians that tie. `prefetch` is the hint
-/// bin_gaussians takes where the key type has one (older headers ignore it).
-struct MeanBitsKey {
-  const float* means;
-  std::uint64_t operator()(std::uint32_t g) const {
-    std::uint64_t h = 0;
-    for (int a = 0; a < 3; ++a) {
-      std::uint32_t b = 0;
-      std::memcpy(&b, &means[3 * std::size_t(g) + std::size_t(a)], sizeof b);
-      h = h * 0x9e3779b97f4a7c15ULL + b;
-    }
-    return h;
-  }
-  void prefetch(std::uint32_t g) const {
-    __builtin_prefetch(&means[3 * std::size_t(g)]);
-    __builtin_prefetch(&means[3 * std::size_t(g) + 2]);
-  }
-};
-
-/// BM_Bin with ties ordered by the means' bits, as `msgs train` bins (about 7% of the visible
-/// Gaussians tie with a neighbour in depth order on the large frame).
+/// BM_Bin with ties ordered by the means' bits (TiesByMean, new on 2026-11-30), as `msgs train`
+/// bins (about 7% of the visible Gaussians tie with a neighbour in depth order on the large
+/// frame).
 void BM_BinTiesByMean(benchmark::State& st) {
   const bool large = st.range(0) != 0;
   const Frame f = large ? frame(1280, 960, 1000000, 12.0) : frame(240, 180, 82000, 5.0);
@@ -87,7 +68,7 @@ void BM_BinTiesByMean(benchmark::State& st) {
   std::uniform_real_distribution<float> u(-1.f, 1.f);
   for (float& m : means) m = u(rng);
   Binning b;
-  const MeanBitsKey key{means.data()};
+  const TiesByMean<float> key{means.data()};
   for (auto _ : st) {
     bin_gaussians(f.visible, f.depth.data(), f.rects.data(), f.grid, b, key);
     benchmark::DoNotOptimize(b.tile_list.data());

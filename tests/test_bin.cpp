@@ -193,9 +193,16 @@ TEST_CASE("bin_gaussians: tile lists front to back, pair numbering, for 1 and 2 
       CAPTURE(extent);
       const TiesById by_id;
       const auto by_hash = [](std::uint32_t g) { return std::uint64_t(g) * 0x9e3779b97f4a7c15ULL >> 40; };
+      // The rasteriser's key (with the prefetch hint); every third Gaussian has the same mean, so
+      // that equal keys fall back to the id.
+      std::vector<float> means(3 * f.depth.size());
+      std::mt19937_64 mrng(5);
+      for (std::size_t i = 0; i < means.size(); ++i) means[i] = (i / 3) % 3 == 0 ? 1.5f : float(mrng() % 4096) / 64.0f;
+      const TiesByMean<float> by_mean{means.data()};
       for (int threads : {1, 2}) {
         check_binning(f, grid, by_id, threads);
         check_binning(f, grid, by_hash, threads);
+        check_binning(f, grid, by_mean, threads);
       }
     }
   const TileGrid grid(240, 180);

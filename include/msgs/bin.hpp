@@ -269,6 +269,28 @@ struct TiesById {
   std::uint64_t operator()(std::uint32_t) const { return 0; }
 };
 
+/// Tie key from the bits of a Gaussian's mean (`means` [N, 3]): Gaussians at exactly the same
+/// depth then blend in an order that does not depend on the order of the model's rows (the
+/// rasteriser's RasterOptions::ties_by_mean). `prefetch` lets bin_gaussians fetch the rows of
+/// later ties while it orders earlier ones.
+template <class S>
+struct TiesByMean {
+  const S* means;
+  std::uint64_t operator()(std::uint32_t g) const {
+    std::uint64_t h = 0;
+    for (int a = 0; a < 3; ++a) {
+      std::uint64_t b = 0;
+      std::memcpy(&b, &means[3 * std::size_t(g) + std::size_t(a)], sizeof(S));
+      h = h * 0x9e3779b97f4a7c15ULL + b;
+    }
+    return h;
+  }
+  void prefetch(std::uint32_t g) const {
+    __builtin_prefetch(&means[3 * std::size_t(g)]);
+    __builtin_prefetch(&means[3 * std::size_t(g) + 2]);
+  }
+};
+
 /// Bin the visible Gaussians. `visible_ids` [V] in increasing order, `depth` [N] camera z,
 /// `rects` [N] pixel rectangles (non-empty for every visible id).
 /// `tie_key(g)`: orders Gaussians at exactly the same depth (then by id). With a key that depends

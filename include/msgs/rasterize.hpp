@@ -155,23 +155,7 @@ class Rasterizer {
     if constexpr (Opt.ties_by_mean) {
       // Gaussians at the same depth blend in the order of their means' bits, not of their rows,
       // so that permuting the rows (the spatial order) leaves every image as it was.
-      struct MeanBits {
-        const S* means;
-        std::uint64_t operator()(std::uint32_t g) const {
-          std::uint64_t h = 0;
-          for (int a = 0; a < 3; ++a) {
-            std::uint64_t b = 0;
-            std::memcpy(&b, &means[3 * std::size_t(g) + std::size_t(a)], sizeof(S));
-            h = h * 0x9e3779b97f4a7c15ULL + b;
-          }
-          return h;
-        }
-        void prefetch(std::uint32_t g) const {  // bin_gaussians fetches the rows of later ties
-          __builtin_prefetch(&means[3 * std::size_t(g)]);
-          __builtin_prefetch(&means[3 * std::size_t(g) + 2]);
-        }
-      };
-      bin_gaussians(visible_, depth_.data(), rects_.data(), grid_, bins_, MeanBits{model.means.data()});
+      bin_gaussians(visible_, depth_.data(), rects_.data(), grid_, bins_, TiesByMean<S>{model.means.data()});
     } else {
       bin_gaussians(visible_, depth_.data(), rects_.data(), grid_, bins_);
     }
