@@ -107,10 +107,11 @@ void BM_TrainStepMemory(benchmark::State& state) {
   k["grads_MiB"] = model_mib<G>(model.size()) + N * 4 * sizeof(float) / kMiB;  // + mean2d, absgrad [N, 2]
   k["adam_moments_MiB"] = 2 * model_mib<G>(model.size());
   k["raster_per_gaussian_MiB"] =
-      N * double(sizeof(Splat<float>) + count * sizeof(float) + sizeof(float) + sizeof(PixelRect) + 2 * sizeof(std::int32_t) + 1) / kMiB +
+      N * double(sizeof(Splat<float>) + count * sizeof(float) + sizeof(float) + sizeof(PixelRect) + 2 * sizeof(std::int32_t) + 1 +
+                 sizeof(std::uint64_t)) / kMiB +  // ..., first pairs by id
       V * (4 + 4 + 8) / kMiB;  // visible ids, depth order, pair offsets
   k["raster_per_intersection_MiB"] =
-      M * double(sizeof(std::uint32_t) + sizeof(std::uint64_t) + sizeof(std::uint16_t)) / kMiB;  // tile_list, pair_index, block_mask
+      M * double(sizeof(std::uint32_t) + sizeof(std::uint16_t)) / kMiB;  // tile_list, block_mask
   k["grad_records_MiB"] = M * double(BlendRecord<false, true>::size(count)) * sizeof(float) / kMiB;
   k["images_MiB"] = double(spec.width) * spec.height * (3 * count + 3) * sizeof(float) / kMiB;  // render, gt, d_image, alpha, T, last
   k["intersections"] = M;

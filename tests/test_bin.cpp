@@ -169,7 +169,8 @@ void check_binning(const Frame& f, const TileGrid& grid, const Tie& tie, int thr
       const PixelRect& r = f.rects[g];
       const int w = r.x1 / TS - r.x0 / TS + 1;
       const std::uint64_t j = std::uint64_t((t / grid.tiles_x - r.y0 / TS) * w + (t % grid.tiles_x - r.x0 / TS));
-      CHECK(b.pair_index[s] == b.pair_offset[position[g]] + j);
+      CHECK(b.pair(g, r, t % grid.tiles_x, t / grid.tiles_x) == b.pair_offset[position[g]] + j);
+      CHECK(b.first_pair_of[g] == b.pair_offset[position[g]]);
     }
   // The depth order of the visible Gaussians.
   std::vector<std::uint32_t> order = f.visible;

@@ -76,14 +76,24 @@ struct Binning {
   /// passed to bin_gaussians): [pair_offset[v], pair_offset[v+1]). Id order lets the gradient
   /// reduction read the model sequentially.
   std::vector<std::uint64_t> pair_offset;
-  /// [M] the pair at tile_list position s is pair pair_index[s] of its Gaussian's range above: the
-  /// blend backward writes each pair's gradient record there, so that the reduction reads each
-  /// Gaussian's records in one sequential run.
-  detail::OverwriteVector<std::uint64_t> pair_index;
+  /// [last visible id + 1] first_pair_of[g] = pair_offset[v] for the v-th visible Gaussian g;
+  /// unspecified for ids not visible. Within its range, a Gaussian numbers its pairs row-major over
+  /// its tile rectangle (pair()): the blend backward writes each pair's gradient record there, so
+  /// that the reduction reads each Gaussian's records in one sequential run. Computed where needed
+  /// instead of stored per pair, which cost the scatter of a million Gaussians a fifth of its time.
+  detail::OverwriteVector<std::uint64_t> first_pair_of;
   detail::OverwriteVector<std::uint32_t> tile_list;  ///< [M] Gaussian ids, grouped by tile, front to back within a tile
   std::vector<std::uint64_t> tile_offset;  ///< [tiles + 1] tile t owns tile_list[tile_offset[t] .. tile_offset[t+1])
 
   std::uint64_t pairs() const { return tile_list.size(); }
+
+  /// The number of the pair of visible Gaussian g, whose pixel rectangle is `rect`, and the tile
+  /// (tx, ty) in g's tile rectangle: g's first pair plus the tile's row-major place in g's tiles.
+  std::uint64_t pair(std::uint32_t g, const PixelRect& rect, int tx, int ty) const {
+    constexpr int TS = TileGrid::kTileSize;
+    const int x0 = rect.x0 / TS, y0 = rect.y0 / TS, w = rect.x1 / TS - x0 + 1;
+    return first_pair_of[g] + std::uint64_t((ty - y0) * w + (tx - x0));
+  }
 
   /// Working memory of bin_gaussians, kept between frames so that binning does not allocate (and
   /// page-fault) anew every frame. Not part of the result.
@@ -101,7 +111,6 @@ struct Binning {
       std::int32_t tx0, ty0, tx1, ty1;
     };
     std::vector<TileRect> rects;             // [V] tile rectangles in depth order
-    std::vector<std::uint64_t> first_pair;   // [V] each one's first pair (pair_offset) in depth order
     std::vector<std::uint64_t> chunk_sums;   // [chunks + 1] pair counts of the prefix sum's chunks
     std::vector<std::uint64_t> hist;         // [chunks, tiles] or [chunks, radix buckets], rows on cache lines
   } scratch;
@@ -369,6 +378,8 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
   }
   // 2. Pairs per Gaussian (counted in step 1), prefix-summed in id order: per fixed chunk, then
   //    the chunks' totals, then each chunk from its offset (integers: the same sums in any order).
+  //    Each Gaussian's first pair is also written by its id (first_pair_of).
+  detail::resize_for_overwrite(out.first_pair_of, V == 0 ? 0 : std::size_t(visible_ids[V - 1]) + 1);
   {
     const int pchunks = detail::fixed_chunks(V);
     sc.chunk_sums.assign(std::size_t(pchunks) + 1, 0);
@@ -384,31 +395,30 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
 #pragma omp parallel for schedule(static)
     for (int k = 0; k < pchunks; ++k) {
       std::uint64_t sum = sc.chunk_sums[std::size_t(k)];
-      for (std::size_t v = V * std::size_t(k) / std::size_t(pchunks), e = V * std::size_t(k + 1) / std::size_t(pchunks); v < e; ++v)
+      for (std::size_t v = V * std::size_t(k) / std::size_t(pchunks), e = V * std::size_t(k + 1) / std::size_t(pchunks); v < e; ++v) {
+        out.first_pair_of[visible_ids[v]] = sum;
         po[v] = sum += po[v];
+      }
     }
   }
   const std::uint64_t M = out.pair_offset[V];
 
-  // The order, the tile rectangles and the first pair of each Gaussian in that order, gathered
-  // once so that the passes below read them sequentially. In depth order the ids jump over the
+  // The order and the tile rectangles of the Gaussians in that order, gathered once so that the
+  // passes below read them sequentially. In depth order the ids jump over the
   // whole model: what a few iterations ahead reads is prefetched (at a million Gaussians nearly
   // every read would otherwise miss the cache).
   out.order.resize(V);
   sc.rects.resize(V);
-  sc.first_pair.resize(V);
 #pragma omp parallel for schedule(static)
   for (std::int64_t i = 0; i < std::int64_t(V); ++i) {
     if (i + kBinPrefetch < std::int64_t(V)) {
       const std::uint32_t vp = items[std::size_t(i + kBinPrefetch)].id;
       __builtin_prefetch(&rects[visible_ids[vp]]);
-      __builtin_prefetch(&out.pair_offset[vp]);
     }
     const std::uint32_t v = items[std::size_t(i)].id, g = visible_ids[v];
     out.order[std::size_t(i)] = g;
     const PixelRect& r = rects[g];
     sc.rects[std::size_t(i)] = {r.x0 / TS, r.y0 / TS, r.x1 / TS, r.y1 / TS};
-    sc.first_pair[std::size_t(i)] = out.pair_offset[v];
   }
 
   // 3. Stable counting sort by tile over a fixed number of chunks, handed out one at a time: the
@@ -457,7 +467,6 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
     out.tile_offset[std::size_t(t) + 1] = sum;
   }
   detail::resize_for_overwrite(out.tile_list, M);  // the scatter below writes every pair
-  detail::resize_for_overwrite(out.pair_index, M);
 #pragma omp parallel for schedule(dynamic, 1)
   for (int k = 0; k < chunks; ++k) {
     std::uint64_t* cursor = hist + std::size_t(k) * row;
@@ -465,13 +474,8 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
     for (std::size_t s = chunk_begin(k); s < e; ++s) {
       const std::uint32_t g = out.order[s];
       const Binning::Scratch::TileRect& r = sc.rects[s];
-      std::uint64_t m = sc.first_pair[s];
       for (int ty = r.ty0; ty <= r.ty1; ++ty)
-        for (int x = r.tx0; x <= r.tx1; ++x) {
-          const std::uint64_t slot = cursor[std::size_t(ty) * tx + std::size_t(x)]++;
-          out.tile_list[slot] = g;
-          out.pair_index[slot] = m++;
-        }
+        for (int x = r.tx0; x <= r.tx1; ++x) out.tile_list[cursor[std::size_t(ty) * tx + std::size_t(x)]++] = g;
     }
   }
 }

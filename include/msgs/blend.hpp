@@ -532,7 +532,7 @@ inline BlendTileCount blend_tile_fwd(const BlendInputs<S>& in, int tile, const B
 /// Backward of blend_tile_fwd for one tile: walks the tile's list back to front, rebuilding each
 /// pixel's transmittance by division (alpha <= 0.99 keeps it well conditioned), and writes one
 /// gradient record per intersection of the tile into `records` ([M, BlendRecord<Depth,
-/// AbsGrad>::size(count)], row = the pair's index in Gaussian order, Binning::pair_index), except
+/// AbsGrad>::size(count)], row = the pair's index in Gaussian order, Binning::pair), except
 /// where the block mask is 0: the caller fills `records` with zeros first, in one sequential pass,
 /// and the records of the splats that blended nowhere (most of them, in a deep scene) are not
 /// written a second time at scattered places. Adds
@@ -626,11 +626,14 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
   constexpr int NL = kAbsX + (AbsGrad ? 2 : 0);  // only the accumulators this instantiation uses
   constexpr int P = TBk::kPerSide;
   const std::uint32_t* list = in.bins->tile_list.data();
-  const std::uint64_t* pair_index = in.bins->pair_index.data();
+  const Binning& bins = *in.bins;
+  const std::uint64_t* first_pair_of = bins.first_pair_of.data();
+  const int tile_x = tile % in.grid->tiles_x, tile_y = tile / in.grid->tiles_x;
   // The list is taken kBlendBatch entries at a time, back to front (detail::BlendBatch).
   detail::BlendBatch<S, NC> batch;
   std::uint32_t position[kBlendBatch];  // in the tile list
   std::uint64_t entry[kBlendBatch];
+  std::uint64_t pair[kBlendBatch];  // the pair each entry's record belongs to (Binning::pair)
   int chunks_end[kBlendBatch];  // splat k's listed chunks end here (they follow those of k - 1)
   for (std::uint64_t top = begin + max_last; top > begin;) {
     const int nb = int(std::min<std::uint64_t>(kBlendBatch, top - begin));
@@ -643,14 +646,10 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
       const std::uint64_t jr = top - 1 - std::uint64_t(k);
       entry[m] = jr;
       m += int(block_mask[jr] != 0);
-      if (jr >= begin + kBlendBatch) {  // the next batch's splat and the record it will write
+      if (jr >= begin + kBlendBatch) {  // the next batch's splat and its first pair
         const std::uint64_t jn = jr - kBlendBatch;
         detail::prefetch_splat(in, list[jn]);
-        if (block_mask[jn] != 0) {  // records scatter: fetched for writing
-          const S* rp = records + pair_index[jn] * std::uint64_t(R);
-          __builtin_prefetch(rp, 1);
-          __builtin_prefetch(rp + R - 1, 1);
-        }
+        if (block_mask[jn] != 0) __builtin_prefetch(&first_pair_of[list[jn]]);
       }
     }
     top -= std::uint64_t(nb);
@@ -661,7 +660,13 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
       const std::uint64_t jr = entry[k];
       const std::uint32_t g = list[jr];
       position[k] = std::uint32_t(jr - begin);
-      batch.add(k, in.splats[g], in.colours + std::size_t(g) * std::size_t(nc), nc, block_mask[jr]);
+      const Splat<S>& s = in.splats[g];
+      batch.add(k, s, in.colours + std::size_t(g) * std::size_t(nc), nc, block_mask[jr]);
+      // The record is written after passes 2 to 4: fetched for writing now (records scatter).
+      pair[k] = bins.pair(g, s.rect, tile_x, tile_y);
+      const S* rp = records + pair[k] * std::uint64_t(R);
+      __builtin_prefetch(rp, 1);
+      __builtin_prefetch(rp + R - 1, 1);
     }
     // Pass 2: the chunks to visit and their sigma, in block order per splat. As in the forward, a
     // chunk without a lane inside the cut and in front of its pixel's last blended splat adds
@@ -740,7 +745,7 @@ inline void blend_tile_bwd(const BlendInputs<S>& in, int tile, const S* transmit
       S sum[NL];
       detail::sum_rows(lane, NL, sum);
       // dL/dsigma = -u: dL/dmean = -(conic (sum v dx, sum v dy)) with v = dL/dsigma, and so on.
-      S* rec = records + pair_index[entry[k]] * std::uint64_t(R);
+      S* rec = records + pair[k] * std::uint64_t(R);
       rec[Rec::kMeanX] = s.a * sum[kUx] + s.b * sum[kUy];
       rec[Rec::kMeanY] = s.b * sum[kUx] + s.c * sum[kUy];
       rec[Rec::kConicA] = S(-0.5) * sum[kUxx];

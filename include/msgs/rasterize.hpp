@@ -231,7 +231,7 @@ class Rasterizer {
     const auto t1 = clock::now();
     // Per-Gaussian reduction in a fixed (tile) order, then projection and colour backward.
     // Gaussians are visited in index order, and the blend backward wrote each one's intersection
-    // records together, in that order (Binning::pair_index): model, gradients and records are
+    // records together, in that order (Binning::pair): model, gradients and records are
     // read and written sequentially.
     // Gaussians are projected a vector of lanes at a time (detail::project_bwd_lanes, the same bits
     // as one at a time), in fixed batches of consecutive visible ids; in single precision the
@@ -890,7 +890,7 @@ class Rasterizer {
   detail::OverwriteVector<std::uint16_t> block_mask_;  // [M] tile blocks each intersection blended into
   std::uint64_t fragments_ = 0, blend_lanes_ = 0;
   std::vector<int> tile_order_;        // [tiles] the blend passes' order (order_tiles)
-  detail::OverwriteVector<S> records_;  // [M, BlendRecord<depth, absgrad>::size(count)] in pair order (Binning::pair_index)
+  detail::OverwriteVector<S> records_;  // [M, BlendRecord<depth, absgrad>::size(count)] in pair order (Binning::pair)
   std::vector<S> bg_partial_;          // [tiles, count]
 };
 
