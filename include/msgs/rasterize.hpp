@@ -206,7 +206,7 @@ class Rasterizer {
     using Rec = BlendRec;
     const int R = Rec::size(count_);
     detail::resize_for_overwrite(records_, bins_.pairs() * std::uint64_t(R));
-    zero_records();  // the blend backward writes the pairs that blended only
+    zero_blended();  // the blend backward writes the records, and sets the flags, of the pairs that blended only
     bg_partial_.assign(std::size_t(grid_.count()) * std::size_t(count_), S(0));
     BlendGradInputs<S> gin;
     gin.d_image = d_image.data.data();
@@ -220,7 +220,7 @@ class Rasterizer {
       for (int i = 0; i < tiles; ++i) {
         const int t = order[i];
         blend_tile_bwd<S, C, kBands, Opt.depth, Opt.absgrad>(
-            in, t, transmittance_.data(), last_.data(), block_mask_.data(), gin, records_.data(),
+            in, t, transmittance_.data(), last_.data(), block_mask_.data(), gin, records_.data(), blended_.data(),
             bg_partial_.data() + std::size_t(t) * std::size_t(count_));
       }
     });
@@ -274,12 +274,18 @@ class Rasterizer {
         // Gaussian has a pair (a non-empty rectangle covers a tile), so a lane moves at most one
         // step per pair. A loop per Gaussian over its 1 to 4 pairs ended in a mispredicted
         // branch nearly every time (7% of this reduction and projection backward).
+        // A pair that did not blend adds a record of zeros (kZeroRecord, without a branch), not
+        // its own, which was never written: in a deep scene most pairs lie behind where their
+        // tile's pixels stopped. The sums are those of every record (acc starts at +0, so it is
+        // never -0, and adding +0 leaves it as it is).
         const std::uint64_t* off = bins_.pair_offset.data() + v0;
+        const std::uint8_t* blended = blended_.data();
         const S* rec = records_.data() + off[0] * std::uint64_t(R);
         int l = 0;
         for (std::uint64_t m = off[0], m_end = off[n]; m < m_end; ++m, rec += R) {
           l += int(m == off[l + 1]);
-          for (int k = 0; k < R; ++k) acc[l][k] += double(rec[k]);
+          const S* r = blended[m] ? rec : kZeroRecord;
+          for (int k = 0; k < R; ++k) acc[l][k] += double(r[k]);
         }
       }
       const std::uint32_t hard = backward_batch<D>(model, ids, n, acc, grads, colour);
@@ -755,13 +761,14 @@ class Rasterizer {
 
   /// Fill the gradient records with zeros, in parallel over fixed chunks (each thread first
   /// touches and streams its own part).
-  void zero_records() {
-    const std::size_t n = records_.size();
+  void zero_blended() {
+    const std::size_t n = bins_.pairs();
+    detail::resize_for_overwrite(blended_, n);
     const int chunks = detail::fixed_chunks(n);
-    S* r = records_.data();
+    std::uint8_t* b = blended_.data();
 #pragma omp parallel for schedule(static)
     for (int k = 0; k < chunks; ++k)
-      std::fill(r + n * std::size_t(k) / std::size_t(chunks), r + n * std::size_t(k + 1) / std::size_t(chunks), S(0));
+      std::fill(b + n * std::size_t(k) / std::size_t(chunks), b + n * std::size_t(k + 1) / std::size_t(chunks), std::uint8_t(0));
   }
 
   /// Zero every gradient of a culled Gaussian (the reduction writes the visible rows, all
@@ -891,6 +898,9 @@ class Rasterizer {
   std::uint64_t fragments_ = 0, blend_lanes_ = 0;
   std::vector<int> tile_order_;        // [tiles] the blend passes' order (order_tiles)
   detail::OverwriteVector<S> records_;  // [M, BlendRecord<depth, absgrad>::size(count)] in pair order (Binning::pair)
+  detail::OverwriteVector<std::uint8_t> blended_;  // [M] in pair order: 1 where the pair blended (its record is written)
+  /// The record of a pair that did not blend.
+  alignas(64) static constexpr S kZeroRecord[BlendRecord<Opt.depth, Opt.absgrad>::size(kBands)] = {};
   std::vector<S> bg_partial_;          // [tiles, count]
 };
 
