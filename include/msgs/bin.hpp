@@ -79,8 +79,8 @@ struct Binning {
   /// [last visible id + 1] first_pair_of[g] = pair_offset[v] for the v-th visible Gaussian g;
   /// unspecified for ids not visible. Within its range, a Gaussian numbers its pairs row-major over
   /// its tile rectangle (pair()): the blend backward writes each pair's gradient record there, so
-  /// that the reduction reads each Gaussian's records in one sequential run. Computed where needed
-  /// instead of stored per pair, which cost the scatter of a million Gaussians a fifth of its time.
+  /// that the reduction reads each Gaussian's records in one sequential run. Computed where needed:
+  /// storing it for every pair took about a fifth of the binning of a million Gaussians.
   detail::OverwriteVector<std::uint64_t> first_pair_of;
   detail::OverwriteVector<std::uint32_t> tile_list;  ///< [M] Gaussian ids, grouped by tile, front to back within a tile
   std::vector<std::uint64_t> tile_offset;  ///< [tiles + 1] tile t owns tile_list[tile_offset[t] .. tile_offset[t+1])
@@ -404,9 +404,9 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
   const std::uint64_t M = out.pair_offset[V];
 
   // The order and the tile rectangles of the Gaussians in that order, gathered once so that the
-  // passes below read them sequentially. In depth order the ids jump over the
-  // whole model: what a few iterations ahead reads is prefetched (at a million Gaussians nearly
-  // every read would otherwise miss the cache).
+  // passes below read them sequentially. In depth order the ids jump over the whole model: what a
+  // few iterations ahead reads is prefetched (at a million Gaussians nearly every read would
+  // otherwise miss the cache).
   out.order.resize(V);
   sc.rects.resize(V);
 #pragma omp parallel for schedule(static)
