@@ -432,11 +432,11 @@ TEST_CASE("msgs import: an image COLMAP cannot register is placed by the rig, wh
   // sits where the scene put it, as well as the registered ones do.
   // COLMAP keeps each band's principal point at the image centre, where the scene's lenses have
   // theirs a pixel or two off: every camera of a band is turned by the same degree or so, which
-  // the band's intrinsics make good. So the placed camera's rotation is held to the errors of
-  // the registered cameras it was placed from.
+  // the band's intrinsics make good. So the placed camera is held to the errors of the
+  // registered cameras it was placed from (below).
   const msgs::synth::SynthScene scene = msgs::synth::make_scene(raw_set_preset(opt), opt.seed);
   std::vector<double> pos_err, nir_rot_err;
-  std::map<std::string, std::map<std::string, double>> rot_err, pos_of;  // [capture][band], registered images
+  std::map<std::string, std::map<std::string, FrameError>> registered;  // [capture][band]
   double placed_pos = 0, placed_rot = 0;
   std::string placed_from;
   int placed = 0;
@@ -451,8 +451,7 @@ TEST_CASE("msgs import: an image COLMAP cannot register is placed by the rig, wh
       CHECK(e.pose == "colmap");
       pos_err.push_back(e.position);
       if (e.band == "MS_NIR") nir_rot_err.push_back(e.degrees);
-      rot_err[e.source.substr(0, e.source.rfind('_'))][e.band] = e.degrees;
-      pos_of[e.source.substr(0, e.source.rfind('_'))][e.band] = e.position;
+      registered[e.source.substr(0, e.source.rfind('_'))][e.band] = e;
     }
   }
   REQUIRE(placed == 1);
@@ -467,15 +466,17 @@ TEST_CASE("msgs import: an image COLMAP cannot register is placed by the rig, wh
   // centimetres turned by the rotation's error): bounds from this run's registration, not fixed
   // ones, since the registration scatters by a degree and by a tenth of the spacing.
   REQUIRE(nir_rot_err.size() == 4);
-  REQUIRE(rot_err["IMG_0003"].count(placed_from) == 1);
+  REQUIRE(registered["IMG_0003"].count(placed_from) == 1);
   double offset_rot = 0, offset_pos = 0;
-  for (const auto& [capture, bands] : rot_err)
+  for (const auto& [capture, bands] : registered)
     if (bands.count("MS_NIR") && bands.count(placed_from)) {
-      offset_rot = std::max(offset_rot, bands.at("MS_NIR") + bands.at(placed_from));
-      offset_pos = std::max(offset_pos, pos_of[capture].at("MS_NIR") + pos_of[capture].at(placed_from));
+      const FrameError &nir = bands.at("MS_NIR"), &from = bands.at(placed_from);
+      offset_rot = std::max(offset_rot, nir.degrees + from.degrees);
+      offset_pos = std::max(offset_pos, nir.position + from.position);
     }
-  const double rot_bound = rot_err["IMG_0003"][placed_from] + offset_rot + 0.1;
-  const double pos_bound = pos_of["IMG_0003"][placed_from] + offset_pos + 0.01;
+  const FrameError& from = registered["IMG_0003"][placed_from];
+  const double rot_bound = from.degrees + offset_rot + 0.1;
+  const double pos_bound = from.position + offset_pos + 0.01;
   const double nir_max = *std::max_element(nir_rot_err.begin(), nir_rot_err.end());
   const double pos_max = *std::max_element(pos_err.begin(), pos_err.end());
   MESSAGE("placed: " << placed_pos << " of the capture spacing from the truth, " << placed_rot
