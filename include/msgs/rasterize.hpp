@@ -759,8 +759,8 @@ class Rasterizer {
     });
   }
 
-  /// Fill the gradient records with zeros, in parallel over fixed chunks (each thread first
-  /// touches and streams its own part).
+  /// Size the per-pair flags of the blend backward (blended_) to this frame's pairs and clear them,
+  /// in parallel over fixed chunks (each thread first touches and streams its own part).
   void zero_blended() {
     const std::size_t n = bins_.pairs();
     detail::resize_for_overwrite(blended_, n);
