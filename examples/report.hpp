@@ -47,7 +47,11 @@ inline bool has_colour_corrected(const std::vector<BandMetrics>& m) {
 /// offsets per channel, and every training image's values.
 inline nlohmann::json exposure_json(const RunResult& r) {
   nlohmann::json out = nlohmann::json::array();
-  for (const auto& [model, e] : r.exposure_params) {
+  for (const auto& entry : r.exposure_params) {
+    // Named members, not a structured binding: the lambda below uses `e`, which Clang before 16
+    // cannot capture from a binding.
+    const auto& model = entry.first;
+    const auto& e = entry.second;
     nlohmann::json jb;
     jb["model"] = model;
     jb["band"] = e.band;

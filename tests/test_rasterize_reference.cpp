@@ -386,7 +386,8 @@ TEST_CASE("pixel_rect_lanes: the rectangles of pixel_rect, lane by lane, for eve
       default: return extent ? ue(rng) : um(rng);
     }
   };
-  for (const auto& [W, H] : {std::pair{64, 48}, std::pair{1, 1}, std::pair{240, 180}}) {
+  for (const auto& size : {std::pair{64, 48}, std::pair{1, 1}, std::pair{240, 180}}) {
+    const int W = size.first, H = size.second;  // not a structured binding: INFO captures them
     for (int t = 0; t < 20000; ++t) {
       detail::ProjVec mx, my, ex, ey;
       for (int l = 0; l < L; ++l) {

@@ -249,8 +249,11 @@ TEST_CASE("single-precision projection hands the hard Gaussians to double precis
       CHECK((hard_bwd[l] != 0) == hard);
       if (hard) {
         CHECK(vis[l] == 0);
-        CHECK(gradl.mean[0][l] == 0.0f);  // untouched: the double-precision pass writes these
-        CHECK(gradl.opacity_logit[l] == 0.0f);
+        // Untouched: the double-precision pass writes these. (Copied out: a reference, as CHECK
+        // takes its operands, cannot bind to a vector lane under Clang.)
+        const float mean0 = gradl.mean[0][l], opacity = gradl.opacity_logit[l];
+        CHECK(mean0 == 0.0f);
+        CHECK(opacity == 0.0f);
       }
     }
   }
@@ -328,7 +331,10 @@ TEST_CASE_TEMPLATE("transpose_square turns an L x L block of vector lanes around
     for (int j = 0; j < L; ++j) r[i][j] = typename detail::Lanes<D>::T(100 * i + j);
   detail::transpose_square(r);
   for (int i = 0; i < L; ++i)
-    for (int j = 0; j < L; ++j) CHECK(r[i][j] == typename detail::Lanes<D>::T(100 * j + i));
+    for (int j = 0; j < L; ++j) {
+      const auto got = r[i][j];  // a copy: CHECK's reference cannot bind to a vector lane under Clang
+      CHECK(got == typename detail::Lanes<D>::T(100 * j + i));
+    }
 }
 
 TEST_CASE("single-precision colour rows move as transposed blocks at every SH degree") {

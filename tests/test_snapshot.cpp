@@ -49,7 +49,9 @@ std::string slurp(const fs::path& p) {
 /// Every model file and every metric of two runs, compared exactly.
 void check_identical(const RunResult& a, const RunResult& b) {
   REQUIRE(a.models.size() == b.models.size());
-  for (const auto& [key, path] : a.models) {
+  for (const auto& entry : a.models) {
+    const auto& key = entry.first;  // not a structured binding: CAPTURE's lambda names it
+    const auto& path = entry.second;
     CAPTURE(key);
     REQUIRE(b.models.count(key) == 1);
     const std::string x = slurp(path), y = slurp(b.models.at(key));

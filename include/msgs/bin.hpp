@@ -319,7 +319,11 @@ inline void bin_gaussians(const std::vector<std::uint32_t>& visible_ids, const S
   //    (increasing ids, so ties stay ordered by id unless tie_key orders them below).
   //    The keys, and the pair count of every Gaussian (its tile-rectangle area, for step 2), are
   //    filled in one parallel pass.
-  auto [items, items2] = sc.template item_buffers<S>();
+  // Plain references, not a structured binding: Clang before 16 cannot name a structured binding
+  // inside the OpenMP regions below.
+  const auto buffers = sc.template item_buffers<S>();
+  auto& items = std::get<0>(buffers);
+  auto& items2 = std::get<1>(buffers);
   items.resize(V);
   out.pair_offset.resize(V + 1);
   out.pair_offset[0] = 0;

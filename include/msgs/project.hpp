@@ -242,17 +242,18 @@ template <class D, int B = Lanes<D>::kCount / 2>
 inline void transpose_square(D* r) {
   constexpr int L = Lanes<D>::kCount;
   static_assert(L > 1 && (L & (L - 1)) == 0 && B >= 1, "transpose_square: vector lanes, a power of two");
-  using I = typename Lanes<D>::M;  // integer lanes as wide as D's: the shuffle's index type
-  I lo, hi;
-  for (int j = 0; j < L; ++j) {  // lanes j with bit B set come from the partner vector
-    lo[j] = (j & B) ? L + j - B : j;
-    hi[j] = (j & B) ? L + j : j + B;
-  }
+  // Lanes j with bit B set come from the partner vector.
+  struct Lo {
+    constexpr int operator()(int j) const { return (j & B) ? L + j - B : j; }
+  };
+  struct Hi {
+    constexpr int operator()(int j) const { return (j & B) ? L + j : j + B; }
+  };
   for (int i = 0; i < L; ++i)
     if (!(i & B)) {
       const D a = r[i], c = r[i + B];
-      r[i] = __builtin_shuffle(a, c, lo);
-      r[i + B] = __builtin_shuffle(a, c, hi);
+      r[i] = shuffle_lanes<Lo>(a, c);
+      r[i + B] = shuffle_lanes<Hi>(a, c);
     }
   if constexpr (B > 1) transpose_square<D, B / 2>(r);
 }

@@ -633,13 +633,15 @@ class Rasterizer {
         return t - (__builtin_convertvector(t, D) < c);  // (true is -1)
       };
       const I rx = radius(pl.extent[0]), ry = radius(pl.extent[1]);
-      I lo_idx, hi_idx;
-      for (int l = 0; l < L; ++l) {
-        lo_idx[l] = l / 2 + (l % 2) * L;
-        hi_idx[l] = L / 2 + l / 2 + (l % 2) * L;
-      }
-      const I r_lo = __builtin_shuffle(rx, ry, lo_idx), r_hi = __builtin_shuffle(rx, ry, hi_idx);
-      const I w_lo = __builtin_shuffle(written, written, lo_idx), w_hi = __builtin_shuffle(written, written, hi_idx);
+      // Lanes interleaved (x0, y0, x1, y1, ...): the first half of the lanes, then the second.
+      struct Lo {
+        constexpr int operator()(int l) const { return l / 2 + (l % 2) * L; }
+      };
+      struct Hi {
+        constexpr int operator()(int l) const { return L / 2 + l / 2 + (l % 2) * L; }
+      };
+      const I r_lo = detail::shuffle_lanes<Lo>(rx, ry), r_hi = detail::shuffle_lanes<Hi>(rx, ry);
+      const I w_lo = detail::shuffle_lanes<Lo>(written, written), w_hi = detail::shuffle_lanes<Hi>(written, written);
       I old_lo, old_hi;
       std::int32_t* r = &radii_[2 * i0];
       std::memcpy(&old_lo, r, sizeof(I));

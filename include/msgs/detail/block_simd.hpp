@@ -12,8 +12,10 @@
 
 #include <bit>
 #include <cmath>
+#include <cstddef>
 #include <cstdint>
 #include <type_traits>
+#include <utility>
 
 #if defined(__SSE2__)
 #include <immintrin.h>
@@ -55,6 +57,19 @@ template <class V, class S>
 inline void broadcast(V& v, S x) {
   using Lane = std::remove_cvref_t<decltype(v[0])>;
   v = Lane(x) - V{};
+}
+
+/// The vector whose lane j is lane Index{}(j) of the concatenation (a, b) (indices from 0 to
+/// 2n - 1 for n-lane vectors): __builtin_shufflevector with the indices of a constexpr function
+/// object, which GCC (12 and later) and Clang both take; GCC's __builtin_shuffle, with an index
+/// vector, is not in Clang.
+template <class Index, class Vec, std::size_t... J>
+inline Vec shuffle_lanes(const Vec& a, const Vec& b, std::index_sequence<J...>) {
+  return __builtin_shufflevector(a, b, Index{}(int(J))...);
+}
+template <class Index, class Vec>
+inline Vec shuffle_lanes(const Vec& a, const Vec& b) {
+  return shuffle_lanes<Index>(a, b, std::make_index_sequence<sizeof(Vec) / sizeof(a[0])>{});
 }
 
 /// Bit i set when lane i of mask `m` (all ones = true) is set: one instruction on x86.
