@@ -110,6 +110,9 @@ std::optional<fs::path> colmap_case(const std::string& name, const std::string& 
   return dir;
 }
 
+// The (exit status, log) pairs below are taken apart into plain variables, not structured
+// bindings: CHECK_MESSAGE and INFO name them inside lambdas, which Clang before 16 refuses.
+
 /// `msgs import` of dir/raw into dir/out with `flags`: its exit status and output.
 std::pair<int, std::string> import_raw(const fs::path& dir, const std::string& out, const std::string& flags) {
   const int rc = run(std::string(MSGS_BIN) + " import --images '" + (dir / "raw").string() + "' --out '" +
@@ -252,7 +255,9 @@ TEST_CASE("msgs import: synthetic MicaSense captures through exiv2 + COLMAP") {
   const fs::path& dir = *dir_or;
   const msgs::synth::RawOptions opt = small_micasense_set();
 
-  const auto [rc, log] = import_ok(dir, "ds", "--eval-every 4");
+  const auto log_run = import_ok(dir, "ds", "--eval-every 4");
+  const int rc = log_run.first;
+  const std::string& log = log_run.second;
   REQUIRE_MESSAGE(rc == 0, log);
   MESSAGE("import of 5 captures x 4 bands at 160x120:\n" << log);
   CHECK(log.find("skipping band Blue") != std::string::npos);
@@ -326,7 +331,9 @@ TEST_CASE("msgs import --matching window and gps: the pairs of nearby captures r
   };
   // 20 images: 190 pairs in all; a window of 2 captures keeps the 30 within the captures and the
   // 28 of one band 1 or 2 captures apart.
-  const auto [rc, log] = import_ok(dir, "ds", "--radiometry none --matching window --window 2");
+  const auto log_run = import_ok(dir, "ds", "--radiometry none --matching window --window 2");
+  const int rc = log_run.first;
+  const std::string& log = log_run.second;
   REQUIRE_MESSAGE(rc == 0, log);
   CHECK_MESSAGE(log.find("matching a window of 2 captures: 58 of the 190 pairs") != std::string::npos, log);
   const msgs::io::Dataset ds = msgs::io::load_dataset(dir / "ds");
@@ -345,8 +352,12 @@ TEST_CASE("msgs import --matching window and gps: the pairs of nearby captures r
       {"--sift-threshold 0", "--sift-threshold expects a contrast in (0, 1)"},
       {"--rig maybe", "--rig expects on or off, got 'maybe'"},
       {"--merge-models yes", "--merge-models expects on or off, got 'yes'"}};
-  for (const auto& [flags, message] : refused) {
-    const auto [rc_bad, log_bad] = import(flags, "bad");
+  for (const auto& refusal : refused) {
+    const std::string& flags = refusal.first;
+    const std::string& message = refusal.second;
+    const auto log_bad_run = import(flags, "bad");
+    const int rc_bad = log_bad_run.first;
+    const std::string& log_bad = log_bad_run.second;
     CHECK_MESSAGE(rc_bad != 0, flags);
     CHECK_MESSAGE(log_bad.find(message) != std::string::npos, log_bad);
   }
@@ -358,7 +369,9 @@ TEST_CASE("msgs import --matching window and gps: the pairs of nearby captures r
   }
   // The synthetic captures carry their positions (XMP exif GPS): each capture's two nearest on
   // the orbit, 58 pairs here as well, register every image.
-  const auto [rc_g, log_g] = import_ok(dir, "gps", "--radiometry none --matching gps --neighbours 2");
+  const auto log_g_run = import_ok(dir, "gps", "--radiometry none --matching gps --neighbours 2");
+  const int rc_g = log_g_run.first;
+  const std::string& log_g = log_g_run.second;
   REQUIRE_MESSAGE(rc_g == 0, log_g);
   CHECK_MESSAGE(log_g.find("matching the 2 nearest captures by GPS: 58 of the 190 pairs") != std::string::npos, log_g);
   const Json tg = Json::parse(slurp(dir / "gps" / "transforms.json"));
@@ -369,7 +382,9 @@ TEST_CASE("msgs import --matching window and gps: the pairs of nearby captures r
   for (int band = 1; band <= 5; ++band)
     REQUIRE(run("exiv2 -q -M'del Xmp.exif.GPSLatitude' '" + (dir / "raw" / ("IMG_0003_" + std::to_string(band) + ".tif")).string() + "'",
                 dir / "exiv2_del.log") == 0);
-  const auto [rc_n, log_n] = import("--matching gps", "nogps");
+  const auto log_n_run = import("--matching gps", "nogps");
+  const int rc_n = log_n_run.first;
+  const std::string& log_n = log_n_run.second;
   CHECK(rc_n != 0);
   CHECK_MESSAGE(log_n.find("--matching gps needs a GPS position for every capture; 1 have none: capture 3") !=
                     std::string::npos,
@@ -406,16 +421,20 @@ TEST_CASE("msgs import: an image COLMAP cannot register is placed by the rig, wh
 
   // Without the rig the image has no pose: an error that names it, and nothing left behind.
   const std::string no_pose = "1 of 20 images have no pose: COLMAP did not register them: IMG_0003_4.tif (MS_NIR)";
-  const auto [rc_off, log_off] = import_failing_with(dir, "off", "--rig off", no_pose);
+  const auto log_off_run = import_failing_with(dir, "off", "--rig off", no_pose);
+  const int rc_off = log_off_run.first;
+  const std::string& log_off = log_off_run.second;
   CHECK(rc_off != 0);
   CHECK_MESSAGE(log_off.find(no_pose) != std::string::npos, log_off);
   CHECK(!fs::exists(dir / "off"));
   CHECK(!leftovers(dir, "off"));
 
   // COLMAP registers the other 19 images nearly always; a run that missed one more is run again.
-  const auto [rc, log] = import_until(dir, "ds", "", [&](int status, const std::string&) {
+  const auto log_run = import_until(dir, "ds", "", [&](int status, const std::string&) {
     return status == 0 && Json::parse(slurp(dir / "ds" / "transforms.json"))["msgs_import"]["registered"] == 19;
   });
+  const int rc = log_run.first;
+  const std::string& log = log_run.second;
   REQUIRE_MESSAGE(rc == 0, log);
   MESSAGE(log);
   CHECK(!leftovers(dir, "ds"));
@@ -501,7 +520,9 @@ TEST_CASE("msgs import: bands that match only among themselves come in through a
   if (!dir_or) return;
   const fs::path& dir = *dir_or;
   const std::string none_beside_d = "rig: MS_NIR: registered together with D in 0 captures";
-  const auto [rc_off, log_off] = import_failing_with(dir, "off", "--matching gps --merge-models off", none_beside_d);
+  const auto log_off_run = import_failing_with(dir, "off", "--matching gps --merge-models off", none_beside_d);
+  const int rc_off = log_off_run.first;
+  const std::string& log_off = log_off_run.second;
   CHECK(rc_off != 0);
   CHECK_MESSAGE(log_off.find(none_beside_d) != std::string::npos, log_off);
   CHECK(!fs::exists(dir / "off"));
@@ -509,11 +530,13 @@ TEST_CASE("msgs import: bands that match only among themselves come in through a
 
   // Now and then COLMAP's main model takes in some of the red-edge and NIR images (a run of its
   // randomised matcher that found matches across the spectrum): run again for the case tested.
-  const auto [rc, log] = import_until(dir, "ds", "--matching gps", [&](int status, const std::string&) {
+  const auto log_run = import_until(dir, "ds", "--matching gps", [&](int status, const std::string&) {
     if (status != 0) return false;
     const Json t = Json::parse(slurp(dir / "ds" / "transforms.json"));
     return t["msgs_import"]["from_models_of_the_rest"].get<int>() >= 16;
   });
+  const int rc = log_run.first;
+  const std::string& log = log_run.second;
   REQUIRE_MESSAGE(rc == 0, log);
   MESSAGE(log);
   CHECK(!leftovers(dir, "ds"));
