@@ -2,15 +2,16 @@
 // Google Benchmark of the arithmetic every evaluated 16-lane vector of the blend pays, forward and
 // backward alike, before any blending: the falloff exp(-sigma) alone, and sigma, exponential and
 // alpha as the blend's passes 2 and 3 compute them (detail::BlendBatch). Inputs are cache
-// resident, so these rates are what the core can do, not what memory allows: the cost of a frame's
-// blend is at least its evaluated vectors (`bench_train_step`'s fragments / lane_use / 16) times
-// s_per_vector here, once for the forward and once for the backward.
+// resident, so these rates are what the core can do, not what memory allows: a frame's blend
+// forward costs at least its evaluated vectors (`bench_train_step`'s fragments / lane_use / 16)
+// times s_per_vector here, and the backward pays it again for every vector it evaluates anew.
 //   ./bench_blend_kernels
 #include <benchmark/benchmark.h>
 
 #include <msgs/blend.hpp>
 
-#include <cstdint>
+#include <algorithm>
+#include <cmath>
 #include <random>
 #include <vector>
 
