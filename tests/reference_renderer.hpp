@@ -316,22 +316,24 @@ GaussianModel<G, S> random_scene(const Camera<S>& cam, const SceneParams& p, std
   return m;
 }
 
+/// Row i of `to` := row j of `from`.
+template <class G, class S>
+void copy_row(const GaussianModel<G, S>& from, std::size_t j, GaussianModel<G, S>& to, std::size_t i) {
+  for (int a = 0; a < 3; ++a) {
+    to.means[3 * i + a] = from.means[3 * j + a];
+    to.log_scales[3 * i + a] = from.log_scales[3 * j + a];
+  }
+  for (int a = 0; a < 4; ++a) to.quats[4 * i + a] = from.quats[4 * j + a];
+  to.opacity_logits[i] = from.opacity_logits[j];
+  for (int c = 0; c < G::bands; ++c)
+    for (int k = 0; k < G::sh_coeffs; ++k) to.sh_at(i, k, c) = from.sh_at(j, k, c);
+}
+
 /// `m` with its rows moved: row i of the result is row row_of(i) of m (row_of a permutation).
 template <class G, class S, class RowOf>
 GaussianModel<G, S> rows_moved(const GaussianModel<G, S>& m, RowOf&& row_of) {
-  const std::size_t n = m.size();
-  GaussianModel<G, S> r(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    const std::size_t j = row_of(i);
-    for (int a = 0; a < 3; ++a) {
-      r.means[3 * i + a] = m.means[3 * j + a];
-      r.log_scales[3 * i + a] = m.log_scales[3 * j + a];
-    }
-    for (int a = 0; a < 4; ++a) r.quats[4 * i + a] = m.quats[4 * j + a];
-    r.opacity_logits[i] = m.opacity_logits[j];
-    for (int c = 0; c < G::bands; ++c)
-      for (int k = 0; k < G::sh_coeffs; ++k) r.sh_at(i, k, c) = m.sh_at(j, k, c);
-  }
+  GaussianModel<G, S> r(m.size());
+  for (std::size_t i = 0; i < m.size(); ++i) copy_row(m, row_of(i), r, i);
   return r;
 }
 

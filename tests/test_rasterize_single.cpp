@@ -449,6 +449,135 @@ TEST_CASE("a colour sink gets the colour gradients the backward would store, onc
 
 namespace {
 
+/// A scene whose back half is hidden: `per_side` random Gaussians in front of a wall of four
+/// nearly opaque discs facing the camera and covering the whole image, which stops every pixel,
+/// and `per_side` random Gaussians behind it, in the view but blending nowhere. Rows alternate
+/// front and back, the wall's four rows last; `hidden[i]` marks the rows behind the wall.
+template <class G>
+GaussianModel<G, float> walled_scene(const Camera<float>& cam, std::size_t per_side, std::vector<bool>& hidden) {
+  SceneParams fp;
+  fp.n = per_side;
+  fp.z_min = 1.5;
+  fp.z_max = 2.5;
+  SceneParams bp = fp;
+  bp.z_min = 5;
+  bp.z_max = 8;
+  const GaussianModel<G, float> front = random_scene<G, float>(cam, fp, 21), back = random_scene<G, float>(cam, bp, 22);
+  constexpr std::size_t kWall = 4;
+  GaussianModel<G, float> m(2 * per_side + kWall);
+  hidden.assign(m.size(), false);
+  for (std::size_t j = 0; j < per_side; ++j) {
+    copy_row(front, j, m, 2 * j);
+    copy_row(back, j, m, 2 * j + 1);
+    hidden[2 * j + 1] = true;
+  }
+  // The discs: the camera's axes as their rotation, 10 x 10 x 0.01 (about 170 px across at depth 3),
+  // on the optical axis at depths 3.0 to 3.3, opacity 0.999.
+  const Camera<double> c = cam.cast<double>();
+  const Eigen::Quaterniond q(c.R.transpose());
+  for (std::size_t w = 0; w < kWall; ++w) {
+    const std::size_t i = 2 * per_side + w;
+    const Eigen::Vector3d x = c.R.transpose() * (Eigen::Vector3d(0, 0, 3.0 + 0.1 * double(w)) - c.t);
+    for (int a = 0; a < 3; ++a) m.means[3 * i + a] = float(x[a]);
+    m.log_scales[3 * i] = m.log_scales[3 * i + 1] = std::log(10.0f);
+    m.log_scales[3 * i + 2] = std::log(0.01f);
+    const double wxyz[4] = {q.w(), q.x(), q.y(), q.z()};
+    for (int a = 0; a < 4; ++a) m.quats[4 * i + a] = float(wxyz[a]);
+    m.opacity_logits[i] = std::log(0.999f / 0.001f);
+    for (int ch = 0; ch < G::bands; ++ch) m.sh_at(i, 0, ch) = 0.3f;
+  }
+  return m;
+}
+
+}  // namespace
+
+TEST_CASE("Gaussians behind an opaque wall get a +0 gradient, and the others the same bits whatever their rows") {
+  // The backward gives a visible Gaussian none of whose pairs blended +0 in every row it writes,
+  // without its projection backward, and packs the others into full vectors: here every vector of
+  // the interleaved rows holds both kinds. Moving the hidden rows first (whole vectors of them) must
+  // change no bit of anyone's gradient, and a colour sink gets zero rows for the hidden ones.
+  using G = Gaussian<3, 3>;
+  const Camera<float> cam = test_camera<float>(64, 48, 30.0, 26.0, 50.0);
+  std::vector<bool> hidden;
+  const GaussianModel<G, float> m = walled_scene<G>(cam, 300, hidden);
+  const std::size_t n = m.size();
+  std::vector<std::size_t> row_of;  // the moved model's row i holds row row_of[i] of m: hidden ones first
+  for (std::size_t i = 0; i < n; ++i)
+    if (hidden[i]) row_of.push_back(i);
+  for (std::size_t i = 0; i < n; ++i)
+    if (!hidden[i]) row_of.push_back(i);
+  const GaussianModel<G, float> moved = rows_moved(m, [&](std::size_t i) { return row_of[i]; });
+  Image<float> wi(cam.width, cam.height, G::bands), wa(cam.width, cam.height, 1);
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  for (float& v : wi.data) v = u(rng);
+  for (float& v : wa.data) v = u(rng);
+
+  constexpr float kSentinel = 12345.0f;
+  const auto backward = [&](Rasterizer<G, float, kSingleAA>& r, const GaussianModel<G, float>& model) {
+    r.forward(model, cam);
+    Gradients<G, float> g;
+    g.model.resize(n);
+    for (auto* v : {&g.model.means, &g.model.log_scales, &g.model.quats, &g.model.opacity_logits, &g.model.sh})
+      v->assign(v->size(), kSentinel);
+    g.mean2d.assign(2 * n, kSentinel);
+    r.backward(wi, &wa, nullptr, g, GradientFill::visible);
+    return g;
+  };
+  Rasterizer<G, float, kSingleAA> ra, rb;
+  const Gradients<G, float> ga = backward(ra, m), gb = backward(rb, moved);
+  CHECK(std::memcmp(ra.image().data.data(), rb.image().data.data(), ra.image().data.size() * sizeof(float)) == 0);
+
+  std::vector<bool> seen(n, false);
+  for (std::uint32_t i : ra.visible()) seen[i] = true;
+  std::size_t hidden_seen = 0, front_seen = 0;
+  for (std::size_t i = 0; i < n; ++i) (hidden[i] ? hidden_seen : front_seen) += seen[i];
+  REQUIRE(hidden_seen > 200);
+  REQUIRE(front_seen > 200);
+
+  std::vector<std::size_t> moved_row(n);
+  for (std::size_t i = 0; i < n; ++i) moved_row[row_of[i]] = i;
+  const float zero = 0.0f;
+  std::size_t not_plus_zero = 0, moved_differs = 0, nonzero_front = 0;
+  const auto row = [&](const float* a, const float* b, std::size_t i, std::size_t w) {  // row i of m, row moved_row[i]
+    for (std::size_t k = 0; k < w; ++k) {
+      if (std::memcmp(&a[k], &b[k], sizeof(float)) != 0) ++moved_differs;
+      if (hidden[i] && std::memcmp(&a[k], &zero, sizeof(float)) != 0) ++not_plus_zero;
+      if (!hidden[i] && a[k] != 0.0f) ++nonzero_front;
+    }
+  };
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!seen[i]) continue;
+    const std::size_t j = moved_row[i];
+    row(&ga.model.means[3 * i], &gb.model.means[3 * j], i, 3);
+    row(&ga.model.log_scales[3 * i], &gb.model.log_scales[3 * j], i, 3);
+    row(&ga.model.quats[4 * i], &gb.model.quats[4 * j], i, 4);
+    row(&ga.model.opacity_logits[i], &gb.model.opacity_logits[j], i, 1);
+    row(&ga.mean2d[2 * i], &gb.mean2d[2 * j], i, 2);
+    for (int ch = 0; ch < G::bands; ++ch) row(ga.model.sh_row(i, ch), gb.model.sh_row(j, ch), i, G::sh_coeffs);
+  }
+  CHECK(not_plus_zero == 0);
+  CHECK(moved_differs == 0);
+  CHECK(nonzero_front > 1000);  // the front Gaussians do get gradients
+
+  // Through a colour sink: each visible Gaussian once per channel, zero rows for the hidden ones,
+  // the stored rows for the others.
+  RecordingSink<G> sink(n);
+  Gradients<G, float> fused;
+  ra.backward(wi, &wa, nullptr, fused, GradientFill::visible, &sink);
+  bool once = true, same = true;
+  for (std::size_t i = 0; i < n; ++i)
+    for (int ch = 0; ch < G::bands; ++ch) {
+      once = once && sink.calls[std::size_t(ch) * n + i] == (seen[i] ? 1 : 0);
+      if (seen[i])
+        same = same && std::memcmp(sink.got.sh_row(i, ch), ga.model.sh_row(i, ch), sizeof(float) * G::sh_coeffs) == 0;
+    }
+  CHECK(once);
+  CHECK(same);
+}
+
+namespace {
+
 /// `m` with its rows rotated by r: row i holds the Gaussian of row (i + r) mod n.
 template <class G>
 GaussianModel<G, float> rotated(const GaussianModel<G, float>& m, std::size_t r) {
