@@ -382,10 +382,6 @@ class Rasterizer {
     else return detail::lane_bits(m);
   }
 
-  /// Projection and colour backward of the visible Gaussians ids[0 .. n) (lanes past n repeat
-  /// ids[0]), from their reduced records acc[l]: writes their rows of `grads`, the colour ones to
-  /// `colour` when given. Returns the lanes handed to double precision (bits; their rows are not
-  /// written).
   /// Batches of consecutive visible ids per work unit of the per-Gaussian backward.
   static constexpr std::int64_t kBackwardRun = 32;
 
@@ -404,21 +400,16 @@ class Rasterizer {
   void zero_gradient_rows(const std::uint32_t* ids, int n, std::uint32_t keep, Gradients<G, S>& grads,
                           ColourGradientSink<S>* colour) const {
     alignas(64) static constexpr S kZeroRow[G::sh_coeffs] = {};
-    for (int l = 0; l < n; ++l) {
-      if (keep >> l & 1u) continue;
-      const std::size_t g = ids[l];
-      grads.mean2d[2 * g] = grads.mean2d[2 * g + 1] = S(0);
-      if constexpr (Opt.absgrad) grads.absgrad[2 * g] = grads.absgrad[2 * g + 1] = S(0);
-      for (int i = 0; i < 3; ++i) grads.model.means[3 * g + i] = grads.model.log_scales[3 * g + i] = S(0);
-      for (int i = 0; i < 4; ++i) grads.model.quats[4 * g + i] = S(0);
-      grads.model.opacity_logits[g] = S(0);
-      if (!colour)
-        for (int ch = first_; ch < first_ + count_; ++ch) std::fill_n(grads.model.sh_row(g, ch), G::sh_coeffs, S(0));
-    }
+    for (int l = 0; l < n; ++l)
+      if (!(keep >> l & 1u)) zero_gradient_row(grads, ids[l], /*zero_colour=*/colour == nullptr);
     if (colour)
       for (int ch = first_; ch < first_ + count_; ++ch) colour->consume(ids, n, keep, ch, kZeroRow, 0);
   }
 
+  /// Projection and colour backward of the visible Gaussians ids[0 .. n) (lanes past n repeat
+  /// ids[0]), from their reduced records acc[l]: writes their rows of `grads`, the colour ones to
+  /// `colour` when given. Returns the lanes handed to double precision (bits; their rows are not
+  /// written).
   template <class D>
   std::uint32_t backward_batch(const Model& model, const std::uint32_t* ids, int n,
                                const double (*acc)[BlendRec::size(kBands)], Gradients<G, S>& grads,
@@ -854,20 +845,22 @@ class Rasterizer {
   /// parallel, since it touches every Gaussian.
   void zero_unseen(Gradients<G, S>& grads, bool zero_colour) const {
     const std::int64_t N = std::int64_t(model_->size());
-    auto& m = grads.model;
-    const int first = first_, last = first_ + count_;
 #pragma omp parallel for schedule(static, 4096)
-    for (std::int64_t ii = 0; ii < N; ++ii) {
-      const std::size_t i = std::size_t(ii);
-      if (visible_flag_[i]) continue;
-      for (int a = 0; a < 3; ++a) m.means[3 * i + std::size_t(a)] = m.log_scales[3 * i + std::size_t(a)] = S(0);
-      for (int a = 0; a < 4; ++a) m.quats[4 * i + std::size_t(a)] = S(0);
-      m.opacity_logits[i] = S(0);
-      grads.mean2d[2 * i] = grads.mean2d[2 * i + 1] = S(0);
-      if constexpr (Opt.absgrad) grads.absgrad[2 * i] = grads.absgrad[2 * i + 1] = S(0);
-      if (zero_colour)
-        for (int ch = first; ch < last; ++ch) std::fill_n(m.sh_row(i, ch), G::sh_coeffs, S(0));
-    }
+    for (std::int64_t ii = 0; ii < N; ++ii)
+      if (!visible_flag_[std::size_t(ii)]) zero_gradient_row(grads, std::size_t(ii), zero_colour);
+  }
+
+  /// Gaussian i's rows of `grads` that the backward writes, +0: geometry, mean2d, absgrad, and the
+  /// rendered channels' colour rows with `zero_colour`.
+  void zero_gradient_row(Gradients<G, S>& grads, std::size_t i, bool zero_colour) const {
+    auto& m = grads.model;
+    for (std::size_t a = 0; a < 3; ++a) m.means[3 * i + a] = m.log_scales[3 * i + a] = S(0);
+    for (std::size_t a = 0; a < 4; ++a) m.quats[4 * i + a] = S(0);
+    m.opacity_logits[i] = S(0);
+    grads.mean2d[2 * i] = grads.mean2d[2 * i + 1] = S(0);
+    if constexpr (Opt.absgrad) grads.absgrad[2 * i] = grads.absgrad[2 * i + 1] = S(0);
+    if (zero_colour)
+      for (int ch = first_; ch < first_ + count_; ++ch) std::fill_n(m.sh_row(i, ch), G::sh_coeffs, S(0));
   }
 
   /// SH coefficients of the rendered channels of a vector of Gaussians (lane type D),
