@@ -419,12 +419,7 @@ inline Dataset load_colmap_dataset(const std::filesystem::path& root, const Load
   }
   if (opt.load_points) {
     ds.points = m.points;
-    const Eigen::Matrix3f R = ds.transform.block<3, 3>(0, 0);
-    const Eigen::Vector3f t = ds.transform.block<3, 1>(0, 3);
-    for (std::size_t i = 0; i < ds.points.size(); ++i) {
-      Eigen::Map<Eigen::Vector3f> p(ds.points.xyz.data() + 3 * i);
-      p = R * p + t;
-    }
+    detail::to_dataset_frame(ds);
   }
   return ds;
 }

@@ -262,6 +262,16 @@ inline void apply_split(Dataset& ds, const std::filesystem::path& split_path) {
   if (!any_list) fail(split_path, "train", "missing (need 'train' and 'eval' lists)");
 }
 
+/// Moves ds.points from the file's coordinates into the dataset's: x = transform * x_file.
+inline void to_dataset_frame(Dataset& ds) {
+  const Eigen::Matrix3f R = ds.transform.block<3, 3>(0, 0);
+  const Eigen::Vector3f t = ds.transform.block<3, 1>(0, 3);
+  for (std::size_t i = 0; i < ds.points.size(); ++i) {
+    Eigen::Map<Eigen::Vector3f> p(ds.points.xyz.data() + 3 * i);
+    p = R * p + t;
+  }
+}
+
 }  // namespace detail
 
 /// Parse transforms.json (and train_split.json when present) under `root` into cameras, bands and
@@ -401,12 +411,7 @@ inline Dataset load_dataset(const std::filesystem::path& root, const LoadOptions
     }
     if (!ply.empty()) {
       ds.points = read_point_cloud(ply);
-      const Eigen::Matrix3f R = ds.transform.block<3, 3>(0, 0);
-      const Eigen::Vector3f t = ds.transform.block<3, 1>(0, 3);
-      for (std::size_t i = 0; i < ds.points.size(); ++i) {
-        Eigen::Map<Eigen::Vector3f> p(ds.points.xyz.data() + 3 * i);
-        p = R * p + t;
-      }
+      detail::to_dataset_frame(ds);
     }
   }
   return ds;
