@@ -28,7 +28,7 @@ constexpr const char* kUsage =
     "usage: msgs train --data DIR --out DIR [--strategy NAME] [--scale F] [--sh-degree D]\n"
     "                  [--bands D,MS_G,...] [--seed S] [--orient none|center] [--resume] [--checkpoint-every N]\n"
     "                  [--sheets N] [--max-gaussians N] [--stop-gaussians N] [--images NAME] [--eval-every N]\n"
-    "                  [--geometry-band ID] [--reorder-every N]\n"
+    "                  [--geometry-band ID] [--reorder-every N] [--densify msgs|gsplat] [--num-downscales N]\n"
     "                  [--exposure [--lr-exposure X]] [--preset reference|fast] [--ssim valid|same]\n"
     "                  [--no-clamp] [--shuffle every-pass|once] [--adam sparse|dense] [--lr-sh-dc X]\n"
     "                  [--spectral-init on|off]\n"
@@ -99,7 +99,8 @@ constexpr const char* kUsage =
     "  --host H          address --view listens on (default 127.0.0.1; see msgs view --help)\n"
     "Ctrl-C stops after the current step, writes a checkpoint, the models and the metrics (no sheets);\n"
     "run the same command with --resume to continue (with --view, Ctrl-C during training also stops the\n"
-    "viewer).\n";
+    "viewer).\n"
+    "Threads: OMP_NUM_THREADS (default: every core); the result is the same, bit for bit, for any count.\n";
 
 std::atomic<bool> g_stop{false};
 void on_sigint(int) { g_stop.store(true); }
