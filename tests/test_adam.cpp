@@ -294,21 +294,14 @@ TEST_CASE("sparse Adam: listed rows update as dense Adam does, other rows and th
   }
 }
 
-TEST_CASE("Unlisted::zero_gradient: dense Adam bit for bit, without reading the unlisted gradient rows") {
-  // More rows than one parallel chunk (2048), listed rows in runs of every length, across chunk
-  // boundaries, at both ends.
-  const std::size_t n = 5000;
+/// Unlisted::zero_gradient over `rows` against dense Adam over a gradient of zeros in the other
+/// rows: the same bits in parameters and moments, with NaN in the unlisted gradient rows, which
+/// the step must not read.
+void check_zero_gradient_rows(std::size_t n, std::vector<std::uint32_t> rows) {
+  for (std::uint32_t r : {2046u, 2047u, 2048u, 4095u, std::uint32_t(n - 1)})
+    if (!std::binary_search(rows.begin(), rows.end(), r)) rows.insert(std::lower_bound(rows.begin(), rows.end(), r), r);
   WarmStart w(n, 31);
   auto& [p, g, pl, dense, lazy] = w;
-  std::vector<std::uint32_t> rows;
-  std::mt19937 rng(33);
-  for (std::uint32_t i = 0; i < n;) {
-    const std::uint32_t run = 1 + rng() % 300, gap = rng() % 200;
-    for (std::uint32_t r = i; r < std::min<std::uint32_t>(std::uint32_t(n), i + run); ++r) rows.push_back(r);
-    i += run + gap;
-  }
-  for (std::uint32_t r : {2046u, 2047u, 2048u, 4095u, 4999u})
-    if (!std::binary_search(rows.begin(), rows.end(), r)) rows.insert(std::lower_bound(rows.begin(), rows.end(), r), r);
   std::vector<bool> listed(n, false);
   for (std::uint32_t r : rows) listed[r] = true;
   REQUIRE(rows.size() > n / 3);
@@ -338,6 +331,35 @@ TEST_CASE("Unlisted::zero_gradient: dense Adam bit for bit, without reading the 
   lazy.step(pl, gl, {}, &none, msgs::Unlisted::zero_gradient);
   CHECK(bits(p.means, pl.means));
   CHECK(bits(p.sh, pl.sh));
+}
+
+TEST_CASE("Unlisted::zero_gradient: dense Adam bit for bit, without reading the unlisted gradient rows") {
+  const std::size_t n = 5000;
+  std::mt19937 rng(33);
+  SUBCASE("long runs: updated run by run") {
+    // More rows than one parallel chunk (2048), listed rows in runs of every length, across chunk
+    // boundaries, at both ends.
+    std::vector<std::uint32_t> rows;
+    for (std::uint32_t i = 0; i < n;) {
+      const std::uint32_t run = 1 + rng() % 300, gap = rng() % 200;
+      for (std::uint32_t r = i; r < std::min<std::uint32_t>(std::uint32_t(n), i + run); ++r) rows.push_back(r);
+      i += run + gap;
+    }
+    check_zero_gradient_rows(n, rows);
+  }
+  SUBCASE("seen and unseen rows alternating: updated chunk by chunk over a copy of the gradient") {
+    // Runs of one to three rows: every chunk takes the path of short runs (Adam::kShortRunRows);
+    // the last chunk's listed runs are long, so both paths meet in one step.
+    std::vector<std::uint32_t> rows;
+    for (std::uint32_t i = 0; i < 4096;) {
+      const std::uint32_t run = 1 + rng() % 3, gap = 1 + rng() % 3;
+      for (std::uint32_t r = i; r < std::min<std::uint32_t>(4096u, i + run); ++r) rows.push_back(r);
+      i += run + gap;
+    }
+    for (std::uint32_t r = 4096; r < n; ++r)
+      if (r % 400 < 250) rows.push_back(r);
+    check_zero_gradient_rows(n, rows);
+  }
 }
 
 TEST_CASE("colour step applied row by row (a fused backward): the bits of one step, dense and sparse") {

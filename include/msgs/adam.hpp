@@ -330,57 +330,77 @@ class Adam {
     }
   }
 
+  /// Rows per work unit of the updates over listed rows (for_each_run, update_group).
+  static constexpr std::ptrdiff_t kRunChunk = 2048;
+
+  /// f(r0, r1, lo, hi) for the fixed chunks [r0, r1) of the rows [0, n), with [lo, hi) the rows of
+  /// `rows` (ascending) inside the chunk; in parallel, in two static halves (each core streams its
+  /// half in order), or with `Dynamic` a chunk at a time.
+  template <bool Dynamic, class F>
+  static void for_each_chunk(std::size_t n, const std::vector<std::uint32_t>& rows, F&& f) {
+    const std::ptrdiff_t chunks = (static_cast<std::ptrdiff_t>(n) + kRunChunk - 1) / kRunChunk;
+    const std::uint32_t* const end = rows.data() + rows.size();
+    const auto chunk = [&](std::ptrdiff_t c) {
+      const std::size_t r0 = std::size_t(c * kRunChunk), r1 = std::min(n, std::size_t((c + 1) * kRunChunk));
+      const std::uint32_t* lo = std::lower_bound(rows.data(), end, std::uint32_t(r0));
+      f(r0, r1, lo, std::lower_bound(lo, end, std::uint32_t(r1)));
+    };
+    if constexpr (Dynamic) {
+#pragma omp parallel for schedule(dynamic, 1)
+      for (std::ptrdiff_t c = 0; c < chunks; ++c) chunk(c);
+    } else {
+#pragma omp parallel for schedule(static)
+      for (std::ptrdiff_t c = 0; c < chunks; ++c) chunk(c);
+    }
+  }
+
+  /// f(first_row, row_count, listed) for the runs of the listed rows [lo, hi) (ascending, inside
+  /// [r0, r1)) and the runs between them, which together cover [r0, r1) in order.
+  template <class F>
+  static void for_each_run_in(std::size_t r0, std::size_t r1, const std::uint32_t* lo, const std::uint32_t* hi, F&& f) {
+    std::size_t r = r0;
+    while (r < r1) {
+      if (lo != hi && *lo == r) {  // a run of listed rows
+        std::size_t e = r + 1;
+        ++lo;
+        while (lo != hi && *lo == e) ++e, ++lo;
+        f(r, e - r, true);
+        r = e;
+      } else {  // up to the next listed row or the chunk's end
+        const std::size_t e = lo != hi ? std::size_t(*lo) : r1;
+        f(r, e - r, false);
+        r = e;
+      }
+    }
+  }
+
   /// Call f(first_row, row_count, listed) for runs of consecutive rows: every row [0, n) as
   /// listed, or the listed ones (ascending), in parallel over fixed chunks of the list
   /// (consecutive visible Gaussians then form long runs, which vectorise like the dense update);
   /// with Unlisted::zero_gradient also the runs between them, as not listed, in parallel over
-  /// fixed chunks of rows: in two static halves (each core streams its half in order), or with
-  /// `Dynamic` a chunk at a time, for a caller that skips the listed runs (finish_colour): visible
-  /// rows cluster in the spatial order, so the halves would not be equal work. Every row is
-  /// independent: the schedule does not change a bit.
+  /// fixed chunks of rows (for_each_chunk): in two static halves, or with `Dynamic` a chunk at a
+  /// time, for a caller that skips the listed runs (finish_colour): visible rows cluster in the
+  /// spatial order, so the halves would not be equal work. Every row is independent: the schedule
+  /// does not change a bit.
   template <bool Dynamic = false, class F>
   static void for_each_run(std::size_t n, const std::vector<std::uint32_t>* rows, Unlisted unlisted, F&& f) {
-    constexpr std::ptrdiff_t kChunk = 2048;
     if (rows && unlisted == Unlisted::zero_gradient) {
-      const std::ptrdiff_t chunks = (static_cast<std::ptrdiff_t>(n) + kChunk - 1) / kChunk;
-      const auto chunk = [&](std::ptrdiff_t c) {
-        const std::size_t r0 = std::size_t(c * kChunk), r1 = std::min(n, std::size_t((c + 1) * kChunk));
-        auto it = std::lower_bound(rows->begin(), rows->end(), std::uint32_t(r0));
-        std::size_t r = r0;
-        while (r < r1) {
-          if (it != rows->end() && *it == r) {  // a run of listed rows
-            std::size_t e = r + 1;
-            ++it;
-            while (e < r1 && it != rows->end() && *it == e) ++e, ++it;
-            f(r, e - r, true);
-            r = e;
-          } else {  // up to the next listed row or the chunk's end
-            const std::size_t e = it != rows->end() ? std::min<std::size_t>(*it, r1) : r1;
-            f(r, e - r, false);
-            r = e;
-          }
-        }
-      };
-      if constexpr (Dynamic) {
-#pragma omp parallel for schedule(dynamic, 1)
-        for (std::ptrdiff_t c = 0; c < chunks; ++c) chunk(c);
-      } else {
-#pragma omp parallel for schedule(static)
-        for (std::ptrdiff_t c = 0; c < chunks; ++c) chunk(c);
-      }
+      for_each_chunk<Dynamic>(n, *rows, [&](std::size_t r0, std::size_t r1, const std::uint32_t* lo, const std::uint32_t* hi) {
+        for_each_run_in(r0, r1, lo, hi, f);
+      });
       return;
     }
     const std::ptrdiff_t total = static_cast<std::ptrdiff_t>(rows ? rows->size() : n);
-    const std::ptrdiff_t chunks = (total + kChunk - 1) / kChunk;
+    const std::ptrdiff_t chunks = (total + kRunChunk - 1) / kRunChunk;
 #pragma omp parallel for schedule(static)
     for (std::ptrdiff_t c = 0; c < chunks; ++c) {
-      const std::ptrdiff_t j1 = std::min(total, (c + 1) * kChunk);
+      const std::ptrdiff_t j1 = std::min(total, (c + 1) * kRunChunk);
       if (!rows) {
-        f(std::size_t(c * kChunk), std::size_t(j1 - c * kChunk), true);
+        f(std::size_t(c * kRunChunk), std::size_t(j1 - c * kRunChunk), true);
         continue;
       }
       const std::uint32_t* r = rows->data();
-      for (std::ptrdiff_t j = c * kChunk; j < j1;) {
+      for (std::ptrdiff_t j = c * kRunChunk; j < j1;) {
         std::ptrdiff_t e = j + 1;
         while (e < j1 && r[e] == r[e - 1] + 1) ++e;
         f(std::size_t(r[j]), std::size_t(e - j), true);
@@ -389,7 +409,18 @@ class Adam {
     }
   }
 
-  /// Update `W` consecutive values per row: every row, or the listed ones.
+  /// A chunk whose listed runs repeat more often than every this many rows on average is updated
+  /// as one run over a copy of its gradient with zeros in the unlisted rows (update_group).
+  static constexpr std::size_t kShortRunRows = 32;
+
+  /// Update `W` consecutive values per row: every row, or the listed ones. With
+  /// Unlisted::zero_gradient a chunk whose seen and unseen rows alternate in short runs (rows
+  /// that densification filled since the last spatial sort, or a view that sees every other row)
+  /// is not updated run by run: runs of one to a few rows of 1 to 4 values each leave the loop
+  /// little to vectorise. The chunk's listed gradient rows are copied into a buffer of zeros and
+  /// the whole chunk is updated as one listed run: the unlisted rows then take the update of a
+  /// gradient of +0, the same expressions as the ZeroGrad update, so the same bits, and their
+  /// gradient rows are still not read.
   template <int W>
   void update_group(std::vector<S>& p, const std::vector<S>& g, std::vector<S>& m, std::vector<S>& v, double lr,
                     std::int64_t t, const std::vector<std::uint32_t>* rows, Unlisted unlisted) const {
@@ -399,10 +430,28 @@ class Adam {
     S* mp = m.data();
     S* vp = v.data();
     const S* gp = g.data();
-    for_each_run(p.size() / W, rows, unlisted, [&](std::size_t row, std::size_t count, bool listed) {
+    const auto run = [&](std::size_t row, std::size_t count, bool listed) {
       const std::size_t o = row * W;
       if (listed) update_run(pp + o, mp + o, vp + o, gp + o, count * W, b, k);
       else update_run<true>(pp + o, mp + o, vp + o, nullptr, count * W, b, k);
+    };
+    if (!(rows && unlisted == Unlisted::zero_gradient)) {
+      for_each_run(p.size() / W, rows, unlisted, run);
+      return;
+    }
+    for_each_chunk<false>(p.size() / W, *rows, [&](std::size_t r0, std::size_t r1, const std::uint32_t* lo, const std::uint32_t* hi) {
+      const std::size_t listed = std::size_t(hi - lo), n = r1 - r0;
+      std::size_t runs = 0;
+      for (const std::uint32_t* it = lo; it != hi; ++it) runs += (it == lo || *it != it[-1] + 1) ? 1 : 0;
+      if (listed == 0 || listed == n || runs * kShortRunRows <= n) {
+        for_each_run_in(r0, r1, lo, hi, run);
+        return;
+      }
+      alignas(64) S buf[kRunChunk * W];
+      std::fill_n(buf, n * W, S(0));
+      for (const std::uint32_t* it = lo; it != hi; ++it)
+        std::copy_n(gp + std::size_t(*it) * W, W, buf + (std::size_t(*it) - r0) * W);
+      update_run(pp + r0 * W, mp + r0 * W, vp + r0 * W, buf, n * W, b, k);
     });
   }
 
