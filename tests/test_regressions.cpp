@@ -105,6 +105,29 @@ TEST_CASE("PLY: a header claiming 1e12 vertices fails before allocating") {
   CHECK(io::inspect_ply(gm).vertices == 4000000000u);
 }
 
+TEST_CASE("PLY (fuzz_ply out-of-memory): data on the end_header line, no newline after it") {
+  const auto dir = scratch("ply_end_header");
+  // As found: 315,460,194 vertices of 11 bytes declared (with leading zeros), and the data on the
+  // end_header line itself. getline read that line to the end of the file, the stream could then
+  // not tell its position, the size check was skipped and 5 GB of columns were allocated.
+  const std::string head = "ply\nformat binary_little_endian 1.0\ncomment written by msgs\nelement vertex " +
+                           std::string(72, '0') +
+                           "315460194\nproperty float x\nproperty int16 y\nproperty float z\nproperty uchar red\n";
+  const std::string data = bytes({0x00, 0x00, 0x00, 0x00, 0x1a, 0x33, 0x4d, 0x00, 0x00, 0x80, 0x3f, 0x00, 0x00,
+                                  0x00, 0x00, 0x00, 0x3f, 0x00, 0x00, 0x00, 0x40, 0x00, 0x00, 0x00});
+  const auto found = put(dir, "found.ply", head + "end_header\t" + data);
+  expect_fast_io_error(found, "'end_header' must stand alone", [&] { (void)io::read_point_cloud(found); });
+  expect_fast_io_error(found, "'end_header' must stand alone", [&] { (void)io::inspect_ply(found); });
+  // The file ends on the end_header line: no data at all, whatever the header declares.
+  const auto bare = put(dir, "bare.ply", head + "end_header");
+  expect_fast_io_error(bare, "declares 315460194 entries", [&] { (void)io::read_point_cloud(bare); });
+  // Trailing blanks and a CR on that line are still a plain end of header.
+  const auto crlf = put(dir, "crlf.ply",
+                        "ply\r\nformat binary_little_endian 1.0\r\nelement vertex 1\r\nproperty float x\r\n"
+                        "property float y\r\nproperty float z\r\nend_header \t\r\n" + std::string(12, '\0'));
+  CHECK(io::read_point_cloud(crlf).size() == 1);
+}
+
 TEST_CASE("PLY: list lengths that are NaN, fractional or 1e30 are refused before the size_t cast") {
   const auto dir = scratch("ply_list");
   const std::string head =

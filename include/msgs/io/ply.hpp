@@ -131,7 +131,12 @@ inline PlyHeader read_ply_header(std::istream& in, const std::filesystem::path& 
     const auto tok = split_ws(line);
     if (tok.empty()) continue;
     const std::string where = cat("header line ", lineno);
-    if (tok[0] == "end_header") break;
+    if (tok[0] == "end_header") {
+      // The data starts after this line's newline: anything else on the line would be read as
+      // part of the header and the data would start too late (or, with no newline, never).
+      if (tok.size() != 1) fail(p, where, "'end_header' must stand alone on its line; the data starts on the next");
+      break;
+    }
     if (tok[0] == "comment" || tok[0] == "obj_info") {
       h.comments.push_back(line.size() > tok[0].size() + 1 ? line.substr(tok[0].size() + 1) : std::string());
     } else if (tok[0] == "format") {
@@ -169,6 +174,9 @@ inline PlyHeader read_ply_header(std::istream& in, const std::filesystem::path& 
     }
   }
   if (!have_format) fail(p, "header has no format line");
+  // A file that ends on the end_header line has no data; clear the end-of-file state so the
+  // size checks see 0 bytes left rather than a stream that cannot tell.
+  if (in.eof()) in.clear();
   return h;
 }
 
