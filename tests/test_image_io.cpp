@@ -3,8 +3,10 @@
 // .npy round trips, bad files, downscale.
 #include <doctest/doctest.h>
 
+#include <cmath>
 #include <cstdlib>
 #include <fstream>
+#include <limits>
 #include <random>
 
 #include <stb/stb_image_write.h>
@@ -169,6 +171,30 @@ TEST_CASE("TIFF layouts: tiled, compressed, float, separate planes and min-is-wh
     REQUIRE(img.channels == 1);
     for (unsigned y = 0; y < h; ++y)
       for (unsigned x = 0; x < w; ++x) REQUIRE(img.at(int(x), int(y), 0) == float(tiff_test_value(x, y, 0)) / 100.0f - 0.5f);
+  }
+  SUBCASE("32-bit float with a NaN (a masked pixel) or an infinity: an error naming the pixel") {
+    const unsigned w = 5, h = 3;
+    for (const float bad : {std::nanf(""), -std::numeric_limits<float>::infinity()}) {
+      const auto p = dir / "masked.tif";
+      TIFF* tif = open_tiff(p, w, h, 32, 1, SAMPLEFORMAT_IEEEFP, PLANARCONFIG_CONTIG, COMPRESSION_NONE, PHOTOMETRIC_MINISBLACK);
+      REQUIRE(tif);
+      std::vector<float> row(w, 0.25f);
+      for (unsigned y = 0; y < h; ++y) {
+        row[3] = y == 1 ? bad : 0.25f;
+        REQUIRE(TIFFWriteScanline(tif, row.data(), y, 0) >= 0);
+      }
+      TIFFClose(tif);
+      std::string msg;
+      try {
+        (void)read_image(p);
+      } catch (const msgs::io::IoError& e) {
+        msg = e.what();
+      }
+      INFO(msg);
+      CHECK(msg.find(p.string()) != std::string::npos);
+      CHECK(msg.find("(3, 1) is NaN or infinite") != std::string::npos);
+      CHECK(msg.find("fill masked or no-data pixels") != std::string::npos);
+    }
   }
   SUBCASE("16-bit, four separate planes") {
     const unsigned w = 6, h = 4;

@@ -300,7 +300,10 @@ inline Image<float> read_tiff(const std::filesystem::path& p, std::size_t file_s
   };
   const bool invert = photo == PHOTOMETRIC_MINISWHITE;
   auto store = [&](std::uint32_t x, std::uint32_t y, int c, float v) {
-    if (!std::isfinite(v)) fail(p, cat("TIFF sample at (", std::to_string(x), ", ", std::to_string(y), ") is not finite"));
+    if (!std::isfinite(v))
+      fail(p, cat("TIFF sample at (", std::to_string(x), ", ", std::to_string(y),
+                  ") is NaN or infinite; msgs needs a finite value in every pixel (fill masked or no-data pixels, "
+                  "e.g. with 0, before training)"));
     img.at(static_cast<int>(x), static_cast<int>(y), c) = invert && !is_float ? 1.0f - v : v;
   };
 
