@@ -17,6 +17,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <string>
 #include <tuple>
@@ -276,6 +277,29 @@ TEST_CASE("checkpoint files refuse the wrong model type, truncation and trailing
   const fs::path tail = scratch() / "tail.ckpt";
   io::write_bytes_atomic(tail, longer.data(), longer.size());
   CHECK_THROWS_WITH_AS(load_checkpoint<G>(tail), doctest::Contains("trailing"), std::runtime_error);
+
+  // Damaged values in a file of the right length: a NaN mean, a negative second moment, a
+  // negative step. Offsets: magic, bands, degree, step, count (32 bytes), then per model five
+  // arrays, each a 64-bit count and its floats (Gaussian<7, 1>: 3 + 3 + 4 + 1 + 28 floats a row).
+  {
+    const std::size_t n = t.model().size(), model_bytes = 5 * 8 + 4 * n * (3 + 3 + 4 + 1 + 28);
+    const auto damaged = [&](const char* name, std::size_t offset, const auto value) {
+      auto b = bytes;
+      std::memcpy(b.data() + offset, &value, sizeof value);
+      const fs::path d = scratch() / name;
+      io::write_bytes_atomic(d, b.data(), b.size());
+      return d;
+    };
+    const fs::path nan_mean = damaged("nan_mean.ckpt", 40, std::numeric_limits<float>::quiet_NaN());
+    CHECK_THROWS_WITH_AS(load_checkpoint<G>(nan_mean), doctest::Contains("field 'means' holds nan at value 0"), std::runtime_error);
+    CHECK_THROWS_WITH_AS(load_checkpoint<G>(nan_mean), doctest::Contains("resume from another checkpoint"), std::runtime_error);
+    const fs::path neg_v = damaged("neg_v.ckpt", 32 + 2 * model_bytes + 8 + 4, -1.0f);
+    CHECK_THROWS_WITH_AS(load_checkpoint<G>(neg_v), doctest::Contains("field 'means' holds -1.0"), std::runtime_error);
+    const fs::path neg_step = damaged("neg_step.ckpt", 16, std::int64_t(-5));
+    CHECK_THROWS_WITH_AS(load_checkpoint<G>(neg_step), doctest::Contains("field 'step' is negative (-5)"), std::runtime_error);
+    // The same place in the first moments may hold any number: -1 there loads.
+    CHECK(load_checkpoint<G>(damaged("neg_m.ckpt", 32 + model_bytes + 8 + 4, -1.0f)).exp_avg.means[1] == -1.0f);
+  }
 
   const fs::path junk = scratch() / "junk.ckpt";
   io::write_text_atomic(junk, "not a checkpoint at all");

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
@@ -163,6 +164,36 @@ GaussianModel<G, float> read_model(CkptReader& r, std::uint64_t n, bool sh_inter
   return m;
 }
 
+/// What each value of a checkpoint may hold: the model's parameters are finite (the PLY writer
+/// refuses anything else), Adam's moments and the statistics are not NaN, and second moments,
+/// gradient norms and radii are not negative. A file of the right length that breaks this is
+/// damaged (a bit flipped on disk, bytes overwritten) and would train on garbage.
+enum class ValueRule { finite, not_nan, not_nan_nonneg };
+
+inline void check_values(const CkptReader& r, const char* field, const std::vector<float>& v, ValueRule rule) {
+  for (std::size_t i = 0; i < v.size(); ++i) {
+    const float x = v[i];
+    const bool ok = rule == ValueRule::finite ? std::isfinite(x) : rule == ValueRule::not_nan ? !std::isnan(x) : x >= 0.0f;
+    if (!ok)
+      r.fail(field, "holds " + std::to_string(x) + " at value " + std::to_string(i) +
+                        ", which training never writes: the file is damaged; resume from another checkpoint or "
+                        "train afresh without --resume");
+  }
+}
+
+template <class G>
+void check_model_values(const CkptReader& r, const GaussianModel<G, float>& m, ValueRule rule) {
+  check_values(r, "means", m.means, rule);
+  check_values(r, "log_scales", m.log_scales, rule);
+  check_values(r, "quats", m.quats, rule);
+  check_values(r, "opacity_logits", m.opacity_logits, rule);
+  check_values(r, "sh", m.sh, rule);
+}
+
+inline void check_count(const CkptReader& r, const char* field, std::int64_t v) {
+  if (v < 0) r.fail(field, "is negative (" + std::to_string(v) + "): the file is damaged");
+}
+
 }  // namespace detail
 
 /// Write `st` to `path` atomically (a temporary beside it, renamed when complete).
@@ -245,6 +276,16 @@ TrainState<G> load_checkpoint(const std::filesystem::path& path) {
   st.stats_grad = r.vec<float>("stats_grad", n * std::uint64_t(st.stats_bands));
   st.stats_count = r.vec<std::uint32_t>("stats_count", n * std::uint64_t(st.stats_bands));
   st.stats_radius = r.vec<float>("stats_radius", n);
+  detail::check_count(r, "step", st.step);
+  detail::check_model_values(r, st.model, detail::ValueRule::finite);
+  detail::check_model_values(r, st.exp_avg, detail::ValueRule::not_nan);
+  detail::check_model_values(r, st.exp_avg_sq, detail::ValueRule::not_nan_nonneg);
+  for (const std::int64_t k : {st.adam_steps.means, st.adam_steps.scales, st.adam_steps.quats, st.adam_steps.opacities})
+    detail::check_count(r, "adam_steps", k);
+  for (const auto k : st.adam_steps.sh) detail::check_count(r, "adam_steps", std::int64_t(k));
+  detail::check_count(r, "adam_iteration", st.adam_iteration);
+  detail::check_values(r, "stats_grad", st.stats_grad, detail::ValueRule::not_nan_nonneg);
+  detail::check_values(r, "stats_radius", st.stats_radius, detail::ValueRule::not_nan_nonneg);
   if (!r.at_end()) {
     // Anything after the statistics must be the exposure section; else it is trailing garbage.
     if (r.remaining() < sizeof detail::kExposureSectionTag) r.fail("end", "has trailing bytes");
