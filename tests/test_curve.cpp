@@ -108,5 +108,19 @@ TEST_CASE("curve file: round trip, and a malformed file is an error naming file 
   }
   std::ofstream(dir / "bad2.curve") << "clock,abc\n";
   CHECK_THROWS_AS(load_curve(dir / "bad2.curve"), io::IoError);
+  // Numbers that parse but that save_curve never writes: each names its line and the value.
+  const std::pair<const char*, const char*> damaged[] = {
+      {"clock,nan\n", "not finite ('nan')"},
+      {"clock,-3\n", "negative time '-3'"},
+      {"clock,1\npoint,1,inf,x,3,D,20,0.5\n", "not finite ('inf')"},
+      {"clock,1\npoint,1,1e300,x,3,D,20,0.5\n", "'1e300' where a whole number >= 0 belongs"},
+      {"clock,1\npoint,1,2,x,-4,D,20,0.5\n", "'-4' where a whole number >= 0 belongs"},
+      {"clock,1\npoint,1,2.5,x,4,D,20,0.5\n", "'2.5' where a whole number >= 0 belongs"},
+      {"clock,1\npoint,1,2,x,4,D,nan,0.5\n", "not finite ('nan')"},
+  };
+  for (const auto& [text, needle] : damaged) {
+    std::ofstream(dir / "bad3.curve") << text;
+    CHECK_THROWS_WITH_AS(load_curve(dir / "bad3.curve"), doctest::Contains(needle), io::IoError);
+  }
   CHECK_THROWS_AS(load_curve(dir / "missing.curve"), io::IoError);
 }

@@ -194,28 +194,43 @@ inline std::pair<double, std::vector<CurvePoint>> load_curve(const std::filesyst
     throw io::IoError(path.string() + ": line " + std::to_string(n) + " " + why +
                       "; delete the file to restart the curve (training itself resumes from the checkpoint)");
   };
+  // save_curve writes finite numbers only (PSNR is capped, psnr_from_mse); "nan" or "inf" would
+  // parse, and then a NaN clock or an out-of-range cast would carry on silently.
   auto num = [&](const std::string& s) {
+    double v = 0.0;
     try {
       std::size_t used = 0;
-      const double v = std::stod(s, &used);
+      v = std::stod(s, &used);
       if (used != s.size()) bad("has a malformed number '" + s + "'");
-      return v;
     } catch (const std::logic_error&) {
       bad("has a malformed number '" + s + "'");
     }
-    return 0.0;
+    if (!std::isfinite(v)) bad("has a number that is not finite ('" + s + "')");
+    return v;
+  };
+  auto seconds = [&](const std::string& s) {
+    const double v = num(s);
+    if (v < 0.0) bad("has a negative time '" + s + "'");
+    return v;
+  };
+  // Steps and Gaussian counts: whole numbers from 0 to 2^53, which the casts below keep exactly.
+  auto count = [&](const std::string& s) {
+    const double v = num(s);
+    if (!(v >= 0.0 && v <= 9007199254740992.0 && v == std::floor(v)))
+      bad("has '" + s + "' where a whole number >= 0 belongs");
+    return v;
   };
   while (std::getline(in, line)) {
     ++n;
     if (line.empty()) continue;
     const auto f = detail::curve_split(line, ',');
-    if (f.size() == 2 && f[0] == "clock") { clock = num(f[1]); continue; }
+    if (f.size() == 2 && f[0] == "clock") { clock = seconds(f[1]); continue; }
     if (f.size() != 8 || f[0] != "point") bad("is neither 'clock,S' nor a point of 8 fields");
     CurvePoint p;
-    p.seconds = num(f[1]);
-    p.step = (long long)num(f[2]);
+    p.seconds = seconds(f[1]);
+    p.step = (long long)count(f[2]);
     p.model = f[3];
-    p.gaussians = std::size_t(num(f[4]));
+    p.gaussians = std::size_t(count(f[4]));
     p.bands = detail::curve_split(f[5], '|');
     for (const auto& s : detail::curve_split(f[6], '|')) p.psnr.push_back(num(s));
     for (const auto& s : detail::curve_split(f[7], '|')) p.ssim.push_back(num(s));
