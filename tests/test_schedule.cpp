@@ -25,6 +25,11 @@ TEST_CASE("ScheduleScale rounds, keeps positive periods positive and zero at zer
   CHECK_THROWS_AS(ScheduleScale{0.0}(10), std::invalid_argument);
   CHECK_THROWS_AS(ScheduleScale{-1.0}(10), std::invalid_argument);
   CHECK_THROWS_AS(ScheduleScale{std::nan("")}(10), std::invalid_argument);
+  // A factor too large for the schedule says so in a line a person can read (not 301 digits).
+  CHECK_THROWS_WITH_AS(ScheduleScale{1e300}(120000),
+                       "ScheduleScale: 120000 steps x 1e+300 is more steps than an int holds (at most 2147483647); "
+                       "a factor up to 17895.7 fits",
+                       std::invalid_argument);
 }
 
 TEST_CASE("SH degree grows one per 5000 steps up to the maximum") {

@@ -8,6 +8,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <limits>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -66,9 +67,13 @@ struct ScheduleScale {
     validate();
     if (steps == 0) return 0;
     const double v = std::round(double(steps) * factor);
-    if (v > double(std::numeric_limits<int>::max()) || v < double(std::numeric_limits<int>::min()))
-      throw std::invalid_argument("ScheduleScale: " + std::to_string(steps) + " x " + std::to_string(factor) +
-                                  " overflows int");
+    if (v > double(std::numeric_limits<int>::max()) || v < double(std::numeric_limits<int>::min())) {
+      std::ostringstream os;  // %g-style: a factor of 1e300 is not printed as 301 digits
+      os << "ScheduleScale: " << steps << " steps x " << factor << " is more steps than an int holds (at most "
+         << std::numeric_limits<int>::max() << "); a factor up to "
+         << double(std::numeric_limits<int>::max()) / std::abs(double(steps)) << " fits";
+      throw std::invalid_argument(os.str());
+    }
     const int r = static_cast<int>(v);
     if (steps > 0 && r < 1) return 1;
     return r;
