@@ -22,6 +22,13 @@ namespace msgs::cli {
     "                    rest trains; default 8 for COLMAP scenes (3DGS convention), and for the\n" \
     "                    nerfstudio layout train_split.json when present, else 10; 0 = no eval\n"
 
+/// "1st", "2nd", "3rd", "4th", ..., "11th", "12th", "13th", ..., "21st", ...
+inline std::string ordinal(int n) {
+  const int tens = n % 100, ones = n % 10;
+  const char* suffix = (tens >= 11 && tens <= 13) ? "th" : ones == 1 ? "st" : ones == 2 ? "nd" : ones == 3 ? "rd" : "th";
+  return std::to_string(n) + suffix;
+}
+
 /// Load --data with --images and --eval-every on top of `lo` (orientation, bands, points), and
 /// say on stderr which layout was found and how the split was made.
 inline io::Dataset load_data(const Args& args, io::LoadOptions lo, const char* command) {
@@ -44,7 +51,8 @@ inline io::Dataset load_data(const Args& args, io::LoadOptions lo, const char* c
   std::size_t eval = 0;
   for (const auto& f : ds.frames) eval += f.split == io::Split::eval;
   std::string split = split_file ? std::string("split from train_split.json")
-                                 : lo.eval_every > 0 ? "every " + std::to_string(lo.eval_every) + "th image per band held out"
+                                 : lo.eval_every == 1 ? std::string("every image held out")
+                                 : lo.eval_every > 0 ? "every " + ordinal(lo.eval_every) + " image per band held out"
                                                      : std::string("no eval images");
   if (!colmap && explicit_every && std::filesystem::exists(root / "train_split.json", ec))
     split += " (train_split.json ignored: --eval-every given)";
