@@ -109,7 +109,7 @@ TEST_CASE("PLY (fuzz_ply out-of-memory): data on the end_header line, no newline
   const auto dir = scratch("ply_end_header");
   // As found: 315,460,194 vertices of 11 bytes declared (with leading zeros), and the data on the
   // end_header line itself. getline read that line to the end of the file, the stream could then
-  // not tell its position, the size check was skipped and 5 GB of columns were allocated.
+  // not tell its position, the size check was skipped and gigabytes of columns were allocated.
   const std::string head = "ply\nformat binary_little_endian 1.0\ncomment written by msgs\nelement vertex " +
                            std::string(72, '0') +
                            "315460194\nproperty float x\nproperty int16 y\nproperty float z\nproperty uchar red\n";
