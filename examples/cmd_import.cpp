@@ -63,7 +63,9 @@ constexpr const char* kUsage =
     "  2. Radiometry from the metadata (exiv2): (DN - black level) / (exposure time x gain x\n"
     "     vignetting), then one common factor per band so the band's brightest value is 1; written\n"
     "     as 16-bit PNG and recorded per frame under \"radiometry\" in transforms.json. Steps whose\n"
-    "     tags are missing are left out for that band, with a warning naming the files.\n"
+    "     tags are missing are left out for that band, with a warning naming the files. A\n"
+    "     vignetting polynomial is the correction the image is multiplied by in DJI files and the\n"
+    "     fall-off it is divided by in all others (keys: msgs/io/capture_meta.hpp).\n"
     "  3. Poses with COLMAP on the CPU (feature_extractor with one camera per band and the focal\n"
     "     length from the metadata as prior; matching of every pair, of nearby captures by GPS or\n"
     "     of a window of captures; mapper) on contrast-stretched 8-bit copies; the largest model\n"
@@ -980,6 +982,10 @@ int run_import(const std::vector<std::string>& argv) {
       rad["exposure_s"] = s.exposure ? nlohmann::ordered_json(it.rad.exposure_s) : nlohmann::ordered_json(nullptr);
       rad["gain"] = s.gain ? nlohmann::ordered_json(it.rad.gain) : nlohmann::ordered_json(nullptr);
       rad["vignetting"] = s.vignetting;
+      if (s.vignetting)
+        rad["vignetting_model"] = it.rad.vignetting_kind == msgs::io::VignettingKind::falloff
+                                      ? "fall-off: the image is divided by 1 + k0 r + k1 r^2 + ..."
+                                      : "correction: the image is multiplied by 1 + k0 r + k1 r^2 + ...";
       rad["scale"] = it.rad.scale;
       rad["dn_max"] = it.rad.dn_max;
       rad["formula"] = it.radiometry_applied
@@ -987,6 +993,8 @@ int run_import(const std::vector<std::string>& argv) {
                            : "value = DN / dn_max (stored values kept: no radiometric metadata)";
       if (it.meta.band_name) rad["band_name"] = *it.meta.band_name;
       if (it.meta.wavelength_nm) rad["wavelength_nm"] = *it.meta.wavelength_nm;
+      // Which exiv2 key each quantity came from, to check against the camera's documentation.
+      if (!it.meta.source.empty()) rad["metadata_keys"] = it.meta.source;
     }
     f["radiometry"] = rad;
     frames.push_back(f);

@@ -229,6 +229,24 @@ TEST_CASE("synth --raw: deterministic bytes, camera file names, metadata exiv2 r
   CHECK(std::abs(local[0] - c.x()) < 0.005);
   CHECK(std::abs(local[1] - c.y()) < 0.005);
   CHECK(std::abs(local[2] - (20.0 + c.z())) < 0.002);
+
+  // DJI: the Mavic 3M's black level key, and its vignetting correction under both DJI's and
+  // Pix4D's keys, read as the correction it is.
+  msgs::synth::RawOptions dji = opt;
+  dji.camera = "dji";
+  dji.captures = 1;
+  dji.overwrite = true;
+  msgs::synth::write_synthetic_raw(dir / "dji", dji);
+  const fs::path g = dir / "dji" / msgs::synth::raw_file_name("dji", msgs::synth::raw_bands("dji")[1], 0);
+  REQUIRE(run("exiv2 -q -P kv '" + g.string() + "'", dir / "exiv2_dji.txt") == 0);
+  const std::string dji_text = slurp(dir / "exiv2_dji.txt");
+  CHECK(dji_text.find("Xmp.Camera.VignettingPolynomial") != std::string::npos);
+  const msgs::io::CaptureMeta d = msgs::io::parse_capture_meta(dji_text, g);
+  CHECK(*d.black_level == 3200);
+  CHECK(d.source.at("black_level") == "Xmp.Camera.BlackCurrent");
+  CHECK(d.vignetting_kind == msgs::io::VignettingKind::correction);
+  CHECK(d.source.at("vignetting") == "Xmp.drone-dji.VignettingData");
+  CHECK(d.has_vignetting());
 }
 
 TEST_CASE("msgs import: junk names and an existing --out are refused, nothing left behind") {
@@ -287,6 +305,9 @@ TEST_CASE("msgs import: synthetic MicaSense captures through exiv2 + COLMAP") {
     REQUIRE(rad["applied"] == true);
     CHECK(rad["black_level"] == 4800.0);
     CHECK(rad["vignetting"] == true);
+    CHECK(rad["vignetting_model"].get<std::string>().rfind("fall-off", 0) == 0);
+    CHECK(rad["metadata_keys"]["black_level"] == "Xmp.Camera.BlackLevel");
+    CHECK(rad["metadata_keys"]["vignetting"] == "Xmp.Camera.VignettingPolynomial");
     CHECK(rad["exposure_s"].get<double>() > 0);
     CHECK(rad["gain"].get<double>() >= 1);
     const std::string src = f["source"];  // IMG_000N_B.tif
@@ -543,6 +564,13 @@ TEST_CASE("msgs import: bands that match only among themselves come in through a
   const Json tf = Json::parse(slurp(dir / "ds" / "transforms.json"));
   const Json& mi = tf["msgs_import"];
   REQUIRE(msgs::io::load_dataset(dir / "ds").frames.size() == 80);
+  for (const auto& f : tf["frames"]) {  // DJI's keys, its vignetting a correction
+    const auto& rad = f["radiometry"];
+    if (rad["applied"] != true) continue;  // the RGB camera's frames
+    CHECK(rad["metadata_keys"]["black_level"] == "Xmp.Camera.BlackCurrent");
+    CHECK(rad["metadata_keys"]["vignetting"] == "Xmp.drone-dji.VignettingData");
+    CHECK(rad["vignetting_model"].get<std::string>().rfind("correction", 0) == 0);
+  }
   CHECK(mi["registered"].get<int>() + mi["from_models_of_the_rest"].get<int>() + mi["placed_by_rig"].get<int>() == 80);
   REQUIRE(mi["models_of_the_rest"]["models"].size() >= 1);
   const Json& model = mi["models_of_the_rest"]["models"][0];

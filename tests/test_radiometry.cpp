@@ -76,6 +76,111 @@ TEST_CASE("capture meta: real EXIF keys, DJI keys, units and precedence") {
   CHECK(!d.exposure_s);
 }
 
+TEST_CASE("capture meta: a MicaSense RedEdge's XMP as exiv2 0.27 prints it") {
+  // The Pix4D Camera namespace of a RedEdge file (http://pix4d.com/camera/1.0, no trailing slash;
+  // the values are that file's) together with its EXIF black level: the polynomial is a fall-off.
+  const char* rededge =
+      "Exif.Image.Make                               MicaSense\n"
+      "Exif.Image.BlackLevel                         4800 4800 4800 4800\n"
+      "Xmp.Camera.BandName                           Blue\n"
+      "Xmp.Camera.CentralWavelength                  475\n"
+      "Xmp.Camera.VignettingCenter                   687.00738320456162, 476.97042888281499\n"
+      "Xmp.Camera.VignettingPolynomial               -0.00010967439073279919, 1.3155710359786701e-06, "
+      "-1.1121968712206205e-08, 3.1272962518162695e-11, -3.8345241237884648e-14, 1.6901727679290724e-17\n";
+  const CaptureMeta m = parse_capture_meta(rededge, "IMG_0000_1.tif");
+  CHECK(*m.band_name == "Blue");
+  CHECK(*m.black_level == 4800);
+  REQUIRE(m.has_vignetting());
+  CHECK(m.vignetting_kind == VignettingKind::falloff);
+  CHECK(m.source.at("vignetting") == "Xmp.Camera.VignettingPolynomial");
+  RadiometrySteps steps;
+  steps.vignetting = true;
+  const FrameRadiometry r = frame_radiometry(m, steps, 65535);
+  // The corner of the 1280x960 frame records about 0.72 of the centre's light.
+  CHECK(vignetting_falloff(r, 0, 0) == doctest::Approx(0.72).epsilon(0.02));
+  CHECK_NOTHROW(check_radiometry(r, 1280, 960, "IMG_0000_1.tif"));
+}
+
+TEST_CASE("capture meta: DJI files' vignetting polynomials are corrections, whichever key holds them") {
+  // A P4 Multispectral writes the correction both as drone-dji:VignettingData and under Pix4D's
+  // Camera key; DJI's own data (with its optical centre) is read.
+  const CaptureMeta p4 = parse_capture_meta(
+      "Exif.Image.Make                               DJI\n"
+      "Xmp.Camera.VignettingPolynomial               0, 5e-07, 0, 1e-13\n"
+      "Xmp.Camera.VignettingCenter                   800, 650\n"
+      "Xmp.drone-dji.VignettingData                  0,1.2e-05,0,3e-11,0,0\n"
+      "Xmp.drone-dji.CalibratedOpticalCenterX        812.5\n"
+      "Xmp.drone-dji.CalibratedOpticalCenterY        640.25\n"
+      "Xmp.drone-dji.BlackLevel                      4096\n",
+      "DJI_0011.TIF");
+  CHECK(p4.vignetting_kind == VignettingKind::correction);
+  CHECK(p4.source.at("vignetting") == "Xmp.drone-dji.VignettingData");
+  CHECK((*p4.vignetting_centre)[0] == 812.5);
+  CHECK(*p4.black_level == 4096);
+
+  // A Mavic 3M: the Camera key alone, the black level as Camera:BlackCurrent, the exposure in
+  // microseconds in DJI's XMP.
+  const char* m3m =
+      "Exif.Image.Make                               DJI\n"
+      "Xmp.Camera.BandName                           NIR\n"
+      "Xmp.Camera.BlackCurrent                       3200\n"
+      "Xmp.Camera.VignettingPolynomial               0, 5e-07, 0, 1e-13\n"
+      "Xmp.Camera.VignettingCenter                   648, 486\n"
+      "Xmp.drone-dji.ExposureTime                    1250\n"
+      "Xmp.drone-dji.SensorGain                      1.044\n";
+  const CaptureMeta d = parse_capture_meta(m3m, "DJI_20240101120000_0001_MS_NIR.TIF");
+  CHECK(d.vignetting_kind == VignettingKind::correction);
+  CHECK(d.source.at("vignetting") == "Xmp.Camera.VignettingPolynomial");
+  CHECK(*d.black_level == 3200);
+  CHECK(d.source.at("black_level") == "Xmp.Camera.BlackCurrent");
+  CHECK(*d.exposure_s == doctest::Approx(0.00125));
+  CHECK(d.source.at("exposure_s") == "Xmp.drone-dji.ExposureTime");
+  RadiometrySteps steps;
+  steps.vignetting = true;
+  const FrameRadiometry r = frame_radiometry(d, steps, 65535);
+  CHECK(vignetting_falloff(r, 0, 0) < 1.0);
+  CHECK_NOTHROW(check_radiometry(r, 1296, 972, "x.tif"));
+  // DJI's whole microseconds win over an EXIF exposure rounded to a shutter-speed step.
+  const CaptureMeta both = parse_capture_meta(std::string(m3m) + "Exif.Photo.ExposureTime 1/800\n", "x.tif");
+  CHECK(*both.exposure_s == doctest::Approx(0.00125));
+  CHECK(both.source.at("exposure_s") == "Xmp.drone-dji.ExposureTime");
+  CHECK_THROWS_WITH_AS(parse_capture_meta("Xmp.drone-dji.ExposureTime -3\n", "x.tif"),
+                       doctest::Contains("microseconds"), IoError);
+
+  // Any drone-dji key marks a DJI file when the make is missing; without a DJI optical centre the
+  // Camera key's polynomial and centre are used.
+  const CaptureMeta no_make = parse_capture_meta(
+      "Xmp.drone-dji.VignettingData 0,1e-05\nXmp.Camera.VignettingPolynomial 0, 2e-05\n"
+      "Xmp.Camera.VignettingCenter 10, 20\n",
+      "x.tif");
+  CHECK(no_make.vignetting_kind == VignettingKind::correction);
+  CHECK(no_make.source.at("vignetting") == "Xmp.Camera.VignettingPolynomial");
+  CHECK((*no_make.vignetting_centre)[1] == 20);
+}
+
+TEST_CASE("radiometry: a vignetting model that brightens the image's edge is an error") {
+  // DJI's correction read as a fall-off would double the vignetting; so would the reverse.
+  FrameRadiometry r;
+  msgs::Image<float> img(100, 80, 1);
+  r.exposure_s = 0.001;
+  r.steps.vignetting = true;
+  r.vignetting_cx = 50;
+  r.vignetting_cy = 40;
+  r.vignetting_poly = {0, 1e-4};  // 1 + 1e-4 r^2: 1.41 at the corner
+  r.vignetting_kind = VignettingKind::falloff;
+  CHECK_THROWS_WITH_AS(normalise_image(img, r, "x.tif"), doctest::Contains("x.tif: the vignetting model (a fall-off"), IoError);
+  CHECK_THROWS_WITH_AS(normalise_image(img, r, "x.tif"), doctest::Contains("--radiometry none"), IoError);
+  r.vignetting_kind = VignettingKind::correction;
+  CHECK_NOTHROW(normalise_image(img, r, "x.tif"));
+  r.vignetting_poly = {0, -1e-4};  // a fall-off read as a correction
+  CHECK_THROWS_WITH_AS(normalise_image(img, r, "x.tif"), doctest::Contains("(a correction polynomial)"), IoError);
+  r.vignetting_kind = VignettingKind::falloff;
+  CHECK_NOTHROW(normalise_image(img, r, "x.tif"));
+  // A weak vignette whose fitted polynomial ends a little above 1 passes.
+  r.vignetting_poly = {0, 0.04 / (64.0 * 64.0)};  // 1.04 at the corner, 64 px away
+  CHECK_NOTHROW(normalise_image(img, r, "x.tif"));
+}
+
 TEST_CASE("capture meta: GPS positions in EXIF, DJI XMP and XMP exif forms") {
   // EXIF: degrees, minutes, seconds as rationals with reference letters; altitude ref 1 = below sea level.
   const CaptureMeta e = parse_capture_meta(

@@ -7,14 +7,19 @@
 //   band name     Xmp.Camera.BandName
 //   wavelength    Xmp.Camera.CentralWavelength (nm)
 //   black level   Exif.Image.BlackLevel (MicaSense, IFD0; several values are averaged),
-//                 Xmp.drone-dji.BlackLevel (DJI), Xmp.Camera.BlackLevel
-//   exposure      Exif.Photo.ExposureTime, Xmp.exif.ExposureTime (seconds, "1/1250" or decimal)
+//                 Xmp.drone-dji.BlackLevel (DJI P4 Multispectral), Xmp.Camera.BlackLevel,
+//                 Xmp.Camera.BlackCurrent (DJI Mavic 3M: "BlackCurrent, black level: 3200")
+//   exposure      Xmp.drone-dji.ExposureTime (DJI, microseconds), Exif.Photo.ExposureTime,
+//                 Xmp.exif.ExposureTime (seconds, "1/1250" or decimal)
 //   gain          Xmp.drone-dji.SensorGain (a factor), else ISO / 100 from Exif.Photo.ISOSpeed,
 //                 Exif.Photo.ISOSpeedRatings, Xmp.exifEX.ISOSpeed, Xmp.exif.ISOSpeedRatings
-//   vignetting    Xmp.Camera.VignettingPolynomial + Xmp.Camera.VignettingCenter (MicaSense: the
-//                 fall-off 1 + k0 r + ... + k5 r^6, r in pixels; the image is divided by it), or
-//                 Xmp.drone-dji.VignettingData + Xmp.drone-dji.CalibratedOpticalCenterX/Y (DJI:
-//                 the correction 1 + k0 r + ..., which multiplies the image)
+//   vignetting    Xmp.Camera.VignettingPolynomial + Xmp.Camera.VignettingCenter (MicaSense and
+//                 Pix4D's convention: the fall-off 1 + k0 r + ... + k5 r^6, r in pixels; the image
+//                 is divided by it). DJI files (Exif.Image.Make "DJI", or any drone-dji key) hold
+//                 the correction 1 + k0 r + ..., which multiplies the image, in
+//                 Xmp.drone-dji.VignettingData + Xmp.drone-dji.CalibratedOpticalCenterX/Y (read
+//                 first, as DJI's processing guides use it) and in the Camera polynomial as well
+//                 (OpenDroneMap multiplies DJI files by it, divides all others).
 //   focal length  Exif.Photo.FocalLength, Xmp.exif.FocalLength (mm)
 //   focal plane   Exif.Photo.FocalPlaneXResolution / YResolution / ResolutionUnit and the same in
 //                 Xmp.exif (unit 2 inch, the EXIF default, 3 cm, 4 mm, 5 micrometre)
@@ -23,6 +28,7 @@
 // key whose value is not what it should be is an IoError naming the file, the key and the value.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdlib>
@@ -85,7 +91,7 @@ inline const std::vector<std::string>& exiv2_metadata_keys() {
       "Exif.GPSInfo.GPSLongitudeRef", "Exif.GPSInfo.GPSAltitude", "Exif.GPSInfo.GPSAltitudeRef",
       "Xmp.drone-dji.GpsLatitude", "Xmp.drone-dji.GpsLongitude", "Xmp.drone-dji.GpsLongtitude",
       "Xmp.drone-dji.AbsoluteAltitude", "Xmp.exif.GPSLatitude", "Xmp.exif.GPSLongitude", "Xmp.exif.GPSAltitude",
-      "Xmp.exif.GPSAltitudeRef"};
+      "Xmp.exif.GPSAltitudeRef", "Xmp.Camera.BlackCurrent", "Xmp.drone-dji.ExposureTime", "Exif.Image.Make"};
   return keys;
 }
 
@@ -317,7 +323,8 @@ inline CaptureMeta capture_meta_from_exiv2(const std::map<std::string, std::stri
     m.wavelength_nm = number(*e, "a wavelength in nm (> 0)", true);
     m.source["wavelength_nm"] = e->first;
   }
-  if (auto e = first({"Exif.Image.BlackLevel", "Xmp.drone-dji.BlackLevel", "Xmp.Camera.BlackLevel"})) {
+  if (auto e = first({"Exif.Image.BlackLevel", "Xmp.drone-dji.BlackLevel", "Xmp.Camera.BlackLevel",
+                      "Xmp.Camera.BlackCurrent"})) {
     const auto list = detail::parse_number_list(e->second);
     if (!list) bad(*e, "a black level (one number, or one per CFA position)");
     double s = 0;
@@ -326,7 +333,12 @@ inline CaptureMeta capture_meta_from_exiv2(const std::map<std::string, std::stri
     if (*m.black_level < 0) bad(*e, "a non-negative black level");
     m.source["black_level"] = e->first;
   }
-  if (auto e = first({"Exif.Photo.ExposureTime", "Xmp.exif.ExposureTime"})) {
+  // DJI's microseconds first: whole microseconds, where EXIF may round to a shutter-speed step
+  // (OpenDroneMap prefers them too).
+  if (auto us = first({"Xmp.drone-dji.ExposureTime"})) {
+    m.exposure_s = number(*us, "an exposure time in microseconds (> 0)", true) * 1e-6;
+    m.source["exposure_s"] = us->first;
+  } else if (auto e = first({"Exif.Photo.ExposureTime", "Xmp.exif.ExposureTime"})) {
     m.exposure_s = number(*e, "an exposure time in seconds (> 0, e.g. 1/1250)", true);
     m.source["exposure_s"] = e->first;
   }
@@ -338,27 +350,45 @@ inline CaptureMeta capture_meta_from_exiv2(const std::map<std::string, std::stri
     m.gain = number(*iso, "an ISO value (> 0)", true) / 100.0;
     m.source["gain"] = iso->first + " / 100";
   }
-  if (auto e = first({"Xmp.Camera.VignettingPolynomial"})) {
-    const auto list = detail::parse_number_list(e->second, 16);
-    if (!list) bad(*e, "a list of up to 16 polynomial coefficients");
+  // Which convention a vignetting polynomial follows depends on the maker, not on the key: DJI
+  // writes its correction under Pix4D's Camera key too.
+  const auto make = first({"Exif.Image.Make"});
+  const bool dji = (make && detail::trim(make->second).substr(0, 3) == "DJI") ||
+                   std::any_of(kv.begin(), kv.end(), [](const auto& e) { return e.first.rfind("Xmp.drone-dji.", 0) == 0; });
+  auto read_vignetting = [&](const char* poly_key, std::initializer_list<const char*> centre_keys, VignettingKind kind) {
+    const auto p = first({poly_key});
+    if (!p) return false;
+    const auto list = detail::parse_number_list(p->second, 16);
+    if (!list) bad(*p, "a list of up to 16 polynomial coefficients");
     m.vignetting_poly = *list;
-    m.vignetting_kind = VignettingKind::falloff;
-    m.source["vignetting"] = e->first;
-    if (auto c = first({"Xmp.Camera.VignettingCenter"})) {
-      const auto cl = detail::parse_number_list(c->second, 2);
-      if (!cl || cl->size() != 2) bad(*c, "two numbers (x, y in pixels)");
-      m.vignetting_centre = std::array<double, 2>{(*cl)[0], (*cl)[1]};
+    m.vignetting_kind = kind;
+    m.source["vignetting"] = p->first;
+    if (centre_keys.size() == 1) {  // one key holding "x, y"
+      if (auto c = first({*centre_keys.begin()})) {
+        const auto cl = detail::parse_number_list(c->second, 2);
+        if (!cl || cl->size() != 2) bad(*c, "two numbers (x, y in pixels)");
+        m.vignetting_centre = std::array<double, 2>{(*cl)[0], (*cl)[1]};
+      }
+    } else {  // one key each for x and y
+      const auto cx = first({*centre_keys.begin()});
+      const auto cy = first({*(centre_keys.begin() + 1)});
+      if (cx && cy) m.vignetting_centre = std::array<double, 2>{number(*cx, "a pixel position", false),
+                                                                number(*cy, "a pixel position", false)};
     }
-  } else if (auto d = first({"Xmp.drone-dji.VignettingData"})) {
-    const auto list = detail::parse_number_list(d->second, 16);
-    if (!list) bad(*d, "a list of up to 16 polynomial coefficients");
-    m.vignetting_poly = *list;
-    m.vignetting_kind = VignettingKind::correction;
-    m.source["vignetting"] = d->first;
-    const auto cx = first({"Xmp.drone-dji.CalibratedOpticalCenterX"});
-    const auto cy = first({"Xmp.drone-dji.CalibratedOpticalCenterY"});
-    if (cx && cy) m.vignetting_centre = std::array<double, 2>{number(*cx, "a pixel position", false),
-                                                              number(*cy, "a pixel position", false)};
+    return true;
+  };
+  const auto dji_data = [&] {
+    return read_vignetting("Xmp.drone-dji.VignettingData",
+                           {"Xmp.drone-dji.CalibratedOpticalCenterX", "Xmp.drone-dji.CalibratedOpticalCenterY"},
+                           VignettingKind::correction);
+  };
+  const auto camera_poly = [&](VignettingKind kind) {
+    return read_vignetting("Xmp.Camera.VignettingPolynomial", {"Xmp.Camera.VignettingCenter"}, kind);
+  };
+  if (dji) {
+    if (!dji_data() || !m.vignetting_centre) camera_poly(VignettingKind::correction);
+  } else if (!camera_poly(VignettingKind::falloff)) {
+    dji_data();
   }
   if (auto e = first({"Exif.Photo.FocalLength", "Xmp.exif.FocalLength"})) {
     m.focal_length_mm = number(*e, "a focal length in mm (> 0)", true);

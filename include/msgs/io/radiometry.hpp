@@ -103,8 +103,12 @@ inline double relative_radiance(double dn, double x, double y, const FrameRadiom
   return (dn - r.black_level) / (r.exposure_s * r.gain * vignetting_falloff(r, x, y));
 }
 
+/// The largest fall-off factor a vignetting model may give the image's farthest pixel (a lens
+/// only darkens; 5% above 1 allows for a fitted polynomial's wobble near a weak vignette).
+inline constexpr double kMaxEdgeFalloff = 1.05;
+
 /// Check the parameters (finite, positive exposure and gain, a vignetting model that stays
-/// positive over the image); IoError naming `file` otherwise.
+/// positive over the image and does not brighten its edge); IoError naming `file` otherwise.
 inline void check_radiometry(const FrameRadiometry& r, int width, int height, const std::filesystem::path& file) {
   if (!(r.dn_max > 0) || !std::isfinite(r.black_level) || !(r.exposure_s > 0) || !(r.gain > 0) ||
       !std::isfinite(r.exposure_s * r.gain) || !(r.scale > 0) || !std::isfinite(r.scale))
@@ -123,6 +127,16 @@ inline void check_radiometry(const FrameRadiometry& r, int width, int height, co
         fail(file, cat("vignetting polynomial is ", p, " at ", rr, " px from its centre (expected > 0 over the image;",
                        " skip the metadata with --radiometry none)"));
     }
+    // A lens darkens the image towards its edge. A model that says the farthest pixel is recorded
+    // brighter than the centre has its convention the wrong way round (a correction read as a
+    // fall-off, or the reverse): applying it would double the vignetting instead of removing it.
+    const double edge = vignetting_falloff(r, r.vignetting_cx + rmax, r.vignetting_cy);
+    if (edge > kMaxEdgeFalloff)
+      fail(file, cat("the vignetting model (", r.vignetting_kind == VignettingKind::falloff ? "a fall-off" : "a correction",
+                     " polynomial) makes the farthest pixel, ", rmax, " px from its centre, ", edge,
+                     " times as bright as the centre, where a lens darkens it: its convention does not fit this",
+                     " camera (msgs reads DJI files' polynomials as corrections, all others as fall-offs);",
+                     " skip the metadata with --radiometry none"));
   }
 }
 

@@ -14,10 +14,12 @@
 //              exif:FocalPlaneXResolution/YResolution/ResolutionUnit (4 = mm). Real MicaSense files
 //              keep exposure, ISO, focal length and black level in EXIF IFDs instead; the importer
 //              reads both places.
-//   dji        DJI_<datetime>_0001_MS_G.TIF, _MS_R, _MS_RE, _MS_NIR, and _D.JPG (8-bit sRGB). XMP:
-//              Camera:BandName, Camera:CentralWavelength, drone-dji:BlackLevel,
-//              drone-dji:SensorGain, drone-dji:VignettingData (a correction polynomial that
-//              multiplies the image), drone-dji:CalibratedOpticalCenterX/Y, exif:ExposureTime,
+//   dji        DJI_<datetime>_0001_MS_G.TIF, _MS_R, _MS_RE, _MS_NIR, and _D.JPG (8-bit sRGB), as a
+//              Mavic 3M names them. XMP: Camera:BandName, Camera:CentralWavelength,
+//              Camera:BlackCurrent (the Mavic 3M's black level), drone-dji:SensorGain,
+//              drone-dji:VignettingData (a correction polynomial that multiplies the image),
+//              drone-dji:CalibratedOpticalCenterX/Y, the same correction again as
+//              Camera:VignettingPolynomial + Camera:VignettingCenter, exif:ExposureTime,
 //              exif:FocalLength, exif:FocalPlane*.
 //   sequoia    IMG_<yymmdd>_<hhmmss>_0001_GRE.TIF, _RED, _REG, _NIR, and _RGB.JPG. Like the real
 //              camera: no black level (DN = radiance x ...) and no MicaSense-style vignetting tags
@@ -364,7 +366,7 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
       attrs.emplace_back("Camera:WavelengthFWHM", detail::g10(b.fwhm_nm));
       attrs.emplace_back("exif:ExposureTime", io::cat("1/", std::lround(1.0 / e.exposure_s)));
       if (opt.camera == "dji") {
-        attrs.emplace_back("drone-dji:BlackLevel", detail::g10(black_level));
+        attrs.emplace_back("Camera:BlackCurrent", detail::g10(black_level));
         attrs.emplace_back("drone-dji:SensorGain", detail::g10(e.gain()));
         std::string kv;
         for (std::size_t i = 0; i < k.size(); ++i) {
@@ -377,10 +379,10 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
       } else {
         elems.emplace_back("exif:ISOSpeedRatings", detail::rdf_seq({double(e.iso)}));
         if (black) attrs.emplace_back("Camera:BlackLevel", detail::g10(black_level));
-        if (vignette) {
-          elems.emplace_back("Camera:VignettingCenter", detail::rdf_seq({vcx, vcy}));
-          elems.emplace_back("Camera:VignettingPolynomial", detail::rdf_seq(k));
-        }
+      }
+      if (vignette) {  // Pix4D's keys (for DJI the same correction again, as the real camera writes it)
+        elems.emplace_back("Camera:VignettingCenter", detail::rdf_seq({vcx, vcy}));
+        elems.emplace_back("Camera:VignettingPolynomial", detail::rdf_seq(k));
       }
       detail::write_raw_tiff(file, cam.width, cam.height, dn, detail::xmp_packet(attrs, elems));
       ++sum.files;
