@@ -60,6 +60,8 @@ constexpr const char* kUsage =
     "     (1 Blue, 2 Green, 3 Red, 4 NIR, 5 RedEdge), DJI Mavic 3M DJI_<datetime>_0001_MS_G.TIF,\n"
     "     _MS_R, _MS_RE, _MS_NIR, _D.JPG, Parrot Sequoia IMG_<date>_<time>_0001_GRE.TIF, _RED, _REG,\n"
     "     _NIR, _RGB.JPG. Bands msgs has no slot for (blue, thermal) are skipped with a warning.\n"
+    "     A central wavelength in the metadata that does not fit the slot (green 490-600 nm, red\n"
+    "     600-700, red edge 690-760, NIR 760-1000) stops the import, naming the file.\n"
     "  2. Radiometry from the metadata (exiv2): (DN - black level) / (exposure time x gain x\n"
     "     vignetting), then one common factor per band so the band's brightest value is 1; written\n"
     "     as 16-bit PNG and recorded per frame under \"radiometry\" in transforms.json. Steps whose\n"
@@ -698,6 +700,25 @@ int run_import(const std::vector<std::string>& argv) {
                                       msgs::cli::tail_lines(work / "exiv2.log", 10)));
         const auto per_file = msgs::io::split_exiv2_output(text, names);
         for (std::size_t i = i0; i < i1; ++i) items[i].meta = msgs::io::parse_capture_meta(per_file[i - i0], images / items[i].source);
+      }
+      // The file name put each image in a band slot; a wavelength in its metadata that does not
+      // fit that slot means the camera orders its bands otherwise (a model or firmware the naming
+      // scheme does not know, or a --bands mapping that swaps two): training on it would fill a
+      // band with another band's light.
+      for (const Item& it : items) {
+        if (!it.meta.wavelength_nm || msgs::io::wavelength_fits_band(it.band, *it.meta.wavelength_nm)) continue;
+        const msgs::io::BandWindow w = msgs::io::band_window(it.band);
+        const auto g = [](double v) {
+          char buf[32];
+          std::snprintf(buf, sizeof buf, "%g", v);
+          return std::string(buf);
+        };
+        fail(images / it.source, it.meta.source.at("wavelength_nm"),
+             cat("the camera says ", g(*it.meta.wavelength_nm), " nm", it.meta.band_name ? " (" + *it.meta.band_name + ")" : "",
+                 ", but ", scan.camera == "patterns" ? std::string("--bands") : "the " + scan.camera + " file name",
+                 " puts the image in ", it.band, " (", g(w.lo_nm), "-", g(w.hi_nm),
+                 " nm): this camera orders its bands otherwise; say which files hold which band with --bands",
+                 " 'PATTERN=ID,...' (see msgs import --help)"));
       }
     }
   }

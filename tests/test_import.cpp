@@ -5,6 +5,7 @@
 // and the exposure differences removed; failures leave nothing behind.
 #include <doctest/doctest.h>
 
+#include <msgs/io/bands.hpp>
 #include <msgs/io/capture_meta.hpp>
 #include <msgs/io/dataset.hpp>
 #include <msgs/io/image_io.hpp>
@@ -265,6 +266,37 @@ TEST_CASE("msgs import: junk names and an existing --out are refused, nothing le
   CHECK(slurp(log).find("already exists") != std::string::npos);
   CHECK(run(std::string(MSGS_BIN) + " import --images x --out y --camera canon", log) == 2);
   CHECK(!leftovers(dir, "out"));
+}
+
+TEST_CASE("msgs import: a band whose wavelength does not fit its slot is refused, nothing left behind") {
+  // Green and red swapped by a --bands mapping: the metadata's wavelengths say so before COLMAP runs.
+  const auto dir_or = colmap_case("swapped", "the band-wavelength check");
+  if (!dir_or) return;
+  const fs::path& dir = *dir_or;
+  if (!on_path("exiv2")) {
+    MESSAGE("SKIPPED: exiv2 not on PATH; the band-wavelength check not tested");
+    return;
+  }
+  const fs::path log = dir / "swapped.log";
+  const int rc = run(std::string(MSGS_BIN) + " import --images '" + (dir / "raw").string() + "' --out '" +
+                         (dir / "out").string() +
+                         "' --bands 'IMG_*_2.tif=MS_R,IMG_*_3.tif=MS_G,IMG_*_5.tif=MS_RE,IMG_*_4.tif=MS_NIR'",
+                     log);
+  const std::string text = slurp(log);
+  CHECK(rc == 1);
+  CHECK_MESSAGE(text.find("IMG_0001_3.tif: field 'Xmp.Camera.CentralWavelength': the camera says 668 nm (Red), "
+                          "but --bands puts the image in MS_G (490-600 nm)") != std::string::npos,
+                text);
+  CHECK(!fs::exists(dir / "out"));
+  CHECK(!leftovers(dir, "out"));
+  // The right mapping passes the check (and goes on to COLMAP, not run here to the end).
+  CHECK(msgs::io::wavelength_fits_band("MS_G", 560));
+  CHECK(msgs::io::wavelength_fits_band("MS_R", 668));
+  CHECK(msgs::io::wavelength_fits_band("MS_RE", 717));
+  CHECK(msgs::io::wavelength_fits_band("MS_NIR", 790));  // Parrot Sequoia
+  CHECK(!msgs::io::wavelength_fits_band("MS_G", 475));   // MicaSense blue
+  CHECK(!msgs::io::wavelength_fits_band("MS_NIR", 10500));
+  CHECK(msgs::io::wavelength_fits_band("D", 10500));     // the RGB camera has no window
 }
 
 TEST_CASE("msgs import: synthetic MicaSense captures through exiv2 + COLMAP") {

@@ -44,6 +44,29 @@ inline const BandInfo* find_band(std::string_view id) {
   return nullptr;
 }
 
+/// The wavelengths a camera band may have and still fill a standard narrow band's slot: green
+/// 490-600 nm, red 600-700, red edge 690-760, near infra-red 760-1000. Wide enough for the filters
+/// of the usual multispectral cameras (MicaSense red 668, red edge 717, NIR 842; DJI 560, 650, 730,
+/// 860; Parrot Sequoia 550, 660, 735, 790) and narrow enough to keep blue, a second green or a
+/// thermal band out. {0, 0} for the RGB camera, which has no single wavelength.
+struct BandWindow {
+  double lo_nm = 0, hi_nm = 0;
+};
+inline BandWindow band_window(std::string_view id) {
+  if (id == "MS_G") return {490.0, 600.0};
+  if (id == "MS_R") return {600.0, 700.0};
+  if (id == "MS_RE") return {690.0, 760.0};
+  if (id == "MS_NIR") return {760.0, 1000.0};
+  return {};
+}
+
+/// Whether a camera band centred at `nm` can fill slot `id` (always true for the RGB camera and
+/// for ids without a window).
+inline bool wavelength_fits_band(std::string_view id, double nm) {
+  const BandWindow w = band_window(id);
+  return w.hi_nm == 0 || (nm >= w.lo_nm && nm <= w.hi_nm);
+}
+
 /// Names of the individual channels of a Joint model, for PLY headers and reports:
 /// D_R D_G D_B MS_G MS_R MS_RE MS_NIR.
 inline std::vector<std::string> joint_channel_names() {
