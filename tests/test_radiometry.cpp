@@ -169,6 +169,8 @@ TEST_CASE("radiometry: a vignetting model that brightens the image's edge is an 
   r.vignetting_poly = {0, 1e-4};  // 1 + 1e-4 r^2: 1.41 at the corner
   r.vignetting_kind = VignettingKind::falloff;
   CHECK_THROWS_WITH_AS(normalise_image(img, r, "x.tif"), doctest::Contains("x.tif: the vignetting model (a fall-off"), IoError);
+  CHECK_THROWS_WITH_AS(normalise_image(img, r, "x.tif"),
+                       doctest::Contains("makes the farthest pixel, 64 px from its centre, 1.41 times as bright"), IoError);
   CHECK_THROWS_WITH_AS(normalise_image(img, r, "x.tif"), doctest::Contains("--radiometry none"), IoError);
   r.vignetting_kind = VignettingKind::correction;
   CHECK_NOTHROW(normalise_image(img, r, "x.tif"));

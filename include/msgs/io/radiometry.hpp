@@ -13,6 +13,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <map>
 #include <string>
@@ -131,12 +132,15 @@ inline void check_radiometry(const FrameRadiometry& r, int width, int height, co
     // brighter than the centre has its convention the wrong way round (a correction read as a
     // fall-off, or the reverse): applying it would double the vignetting instead of removing it.
     const double edge = vignetting_falloff(r, r.vignetting_cx + rmax, r.vignetting_cy);
-    if (edge > kMaxEdgeFalloff)
+    if (edge > kMaxEdgeFalloff) {
+      char times[32];
+      std::snprintf(times, sizeof times, "%.3g", edge);
       fail(file, cat("the vignetting model (", r.vignetting_kind == VignettingKind::falloff ? "a fall-off" : "a correction",
-                     " polynomial) makes the farthest pixel, ", rmax, " px from its centre, ", edge,
+                     " polynomial) makes the farthest pixel, ", std::lround(rmax), " px from its centre, ", times,
                      " times as bright as the centre, where a lens darkens it: its convention does not fit this",
                      " camera (msgs reads DJI files' polynomials as corrections, all others as fall-offs);",
                      " skip the metadata with --radiometry none"));
+    }
   }
 }
 
