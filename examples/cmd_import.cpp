@@ -757,12 +757,12 @@ int run_import(const std::vector<std::string>& argv) {
       const int bits = tiff_bits(src);
       const double dn_max = bits == 16 ? 65535.0 : bits == 8 || bits == 0 ? 255.0 : 1.0;
       if (bits != 8 && bits != 16 && bits != 0) fail(src, cat("unsupported ", bits, "-bit samples for a multispectral band (need 8 or 16)"));
-      it.rad = msgs::io::frame_radiometry(it.meta, steps, dn_max);
-      it.radiometry_applied = steps.any();
       const msgs::Image<float> raw = msgs::io::read_image(src);
       if (raw.channels != 1) fail(src, cat("band ", band, " needs a single-channel image, this one has ", raw.channels));
       it.width = raw.width;
       it.height = raw.height;
+      it.rad = msgs::io::frame_radiometry(it.meta, steps, dn_max, raw.width, raw.height);
+      it.radiometry_applied = steps.any();
       if (it.radiometry_applied) mx = std::max(mx, double(msgs::io::max_value(msgs::io::normalise_image(raw, it.rad, src))));
     }
     band_max[band] = mx;
@@ -1004,7 +1004,9 @@ int run_import(const std::vector<std::string>& argv) {
       rad["gain"] = s.gain ? nlohmann::ordered_json(it.rad.gain) : nlohmann::ordered_json(nullptr);
       rad["vignetting"] = s.vignetting;
       if (s.vignetting)
-        rad["vignetting_model"] = it.rad.vignetting_kind == msgs::io::VignettingKind::falloff
+        rad["vignetting_model"] = !it.rad.vignetting_poly2d.empty()
+                                      ? "fall-off: the image is divided by sum_i c_i (x / width)^a_i (y / height)^b_i"
+                                  : it.rad.vignetting_kind == msgs::io::VignettingKind::falloff
                                       ? "fall-off: the image is divided by 1 + k0 r + k1 r^2 + ..."
                                       : "correction: the image is multiplied by 1 + k0 r + k1 r^2 + ...";
       rad["scale"] = it.rad.scale;

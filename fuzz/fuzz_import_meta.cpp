@@ -42,7 +42,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     const io::CaptureMeta m = io::parse_capture_meta(text, "fuzz.tif");
     // The plan and the per-frame parameters must also be safe to form (and to check).
     const io::BandPlan plan = io::plan_band({m, m}, {"a.tif", "b.tif"});
-    io::FrameRadiometry r = io::frame_radiometry(m, plan.steps, 65535.0);
+    io::FrameRadiometry r = io::frame_radiometry(m, plan.steps, 65535.0, 8, 6);
     io::check_radiometry(r, 8, 6, "fuzz.tif");
     (void)io::relative_radiance(1000.0, 3.0, 2.0, r);
     // A position that was read is a finite place on the Earth, and pairs can be formed from it.

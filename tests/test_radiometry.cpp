@@ -7,6 +7,7 @@
 #include <msgs/io/capture_meta.hpp>
 #include <msgs/io/radiometry.hpp>
 
+#include <array>
 #include <cmath>
 #include <string>
 #include <vector>
@@ -156,6 +157,56 @@ TEST_CASE("capture meta: DJI files' vignetting polynomials are corrections, whic
   CHECK(no_make.vignetting_kind == VignettingKind::correction);
   CHECK(no_make.source.at("vignetting") == "Xmp.Camera.VignettingPolynomial");
   CHECK((*no_make.vignetting_centre)[1] == 20);
+}
+
+TEST_CASE("capture meta: the 2-D vignetting polynomial of Parrot Sequoia and MicaSense RedEdge-P") {
+  // sum_i c_i (x/W)^a_i (y/H)^b_i, the exponent pairs in the Name key; read where no radial model is.
+  const char* sequoia =
+      "Xmp.Camera.BandName                           Green\n"
+      "Xmp.Camera.VignettingPolynomial2D             0.7, 0.6, 0.6, -0.6, -0.6\n"
+      "Xmp.Camera.VignettingPolynomial2DName         0, 0, 1, 0, 0, 1, 2, 0, 0, 2\n";
+  const CaptureMeta m = parse_capture_meta(sequoia, "IMG_240601_100000_0001_GRE.TIF");
+  REQUIRE(m.has_vignetting());
+  CHECK(!m.has_radial_vignetting());
+  CHECK(m.source.at("vignetting") == "Xmp.Camera.VignettingPolynomial2D");
+  REQUIRE(m.vignetting_exp2d.size() == 5);
+  CHECK(m.vignetting_exp2d[3] == std::array<int, 2>{2, 0});
+  RadiometrySteps steps;
+  steps.vignetting = true;
+  const FrameRadiometry r = frame_radiometry(m, steps, 65535, 200, 100);
+  CHECK(vignetting_falloff(r, 100, 50) == doctest::Approx(1.0));  // u = v = 1/2
+  CHECK(vignetting_falloff(r, 0, 0) == doctest::Approx(0.7));
+  CHECK(vignetting_falloff(r, 100, 0) == doctest::Approx(0.85));
+  msgs::Image<float> img(200, 100, 1);
+  img.at(0, 0, 0) = 0.7f * 0.5f;
+  img.at(100, 50, 0) = 0.5f;
+  const auto n = normalise_image(img, r, "x.tif");  // divided by the fall-off: one radiance
+  CHECK(n.at(0, 0, 0) == doctest::Approx(n.at(100, 50, 0)).epsilon(1e-5));
+
+  // A radial model, where there is one, wins; a 2-D model without its exponents, or with the
+  // wrong number of them, is an error naming the key.
+  const CaptureMeta both = parse_capture_meta(std::string(kMicaSense) + sequoia, "x.tif");
+  CHECK(both.has_radial_vignetting());
+  CHECK(both.vignetting_poly2d.empty());
+  CHECK_THROWS_WITH_AS(parse_capture_meta("Xmp.Camera.VignettingPolynomial2D 1, 2\n", "x.tif"),
+                       doctest::Contains("Xmp.Camera.VignettingPolynomial2D"), IoError);
+  CHECK_THROWS_WITH_AS(
+      parse_capture_meta("Xmp.Camera.VignettingPolynomial2D 1, 2\nXmp.Camera.VignettingPolynomial2DName 0, 0, 1\n", "x.tif"),
+      doctest::Contains("two exponents (of x and y) for each of the 2 coefficients"), IoError);
+  CHECK_THROWS_WITH_AS(
+      parse_capture_meta("Xmp.Camera.VignettingPolynomial2D 1\nXmp.Camera.VignettingPolynomial2DName 0, 1.5\n", "x.tif"),
+      doctest::Contains("whole exponents"), IoError);
+
+  // The checks: the size it was set up for, positive over the image, no brighter corners.
+  CHECK_THROWS_WITH_AS(normalise_image(msgs::Image<float>(20, 10, 1), r, "x.tif"), doctest::Contains("set up for a 200x100"),
+                       IoError);
+  FrameRadiometry bright = r;
+  bright.vignetting_poly2d = {1.3, -0.6, -0.6, 0.6, 0.6};  // 1.3 - 0.6 (...): 1.0 at the centre, 1.3 in the corners
+  CHECK_THROWS_WITH_AS(normalise_image(img, bright, "x.tif"),
+                       doctest::Contains("(the 2-D fall-off polynomial) makes a corner 1.3 times as bright"), IoError);
+  FrameRadiometry hole = r;
+  hole.vignetting_poly2d = {-0.3, 0.6, 0.6, -0.6, -0.6};  // 0 at the centre
+  CHECK_THROWS_WITH_AS(normalise_image(img, hole, "x.tif"), doctest::Contains("2-D vignetting polynomial is"), IoError);
 }
 
 TEST_CASE("radiometry: a vignetting model that brightens the image's edge is an error") {

@@ -19,7 +19,11 @@
 //                 the correction 1 + k0 r + ..., which multiplies the image, in
 //                 Xmp.drone-dji.VignettingData + Xmp.drone-dji.CalibratedOpticalCenterX/Y (read
 //                 first, as DJI's processing guides use it) and in the Camera polynomial as well
-//                 (OpenDroneMap multiplies DJI files by it, divides all others).
+//                 (OpenDroneMap multiplies DJI files by it, divides all others). Without a radial
+//                 model: Xmp.Camera.VignettingPolynomial2D + Xmp.Camera.VignettingPolynomial2DName
+//                 (Parrot Sequoia, MicaSense RedEdge-P and Altum-PT: the fall-off
+//                 sum_i c_i (x / width)^a_i (y / height)^b_i, the exponents a_0, b_0, a_1, b_1, ...
+//                 in the Name key; the image is divided by it)
 //   focal length  Exif.Photo.FocalLength, Xmp.exif.FocalLength (mm)
 //   focal plane   Exif.Photo.FocalPlaneXResolution / YResolution / ResolutionUnit and the same in
 //                 Xmp.exif (unit 2 inch, the EXIF default, 3 cm, 4 mm, 5 micrometre)
@@ -56,9 +60,13 @@ struct CaptureMeta {
   std::optional<double> black_level;   ///< in the file's digital numbers
   std::optional<double> exposure_s;
   std::optional<double> gain;          ///< linear factor (ISO / 100 when only ISO is given)
-  std::vector<double> vignetting_poly; ///< k0, k1, ... (empty: no vignetting model)
+  std::vector<double> vignetting_poly; ///< k0, k1, ... (empty: no radial vignetting model)
   std::optional<std::array<double, 2>> vignetting_centre;  ///< pixels
   VignettingKind vignetting_kind = VignettingKind::falloff;
+  /// The 2-D fall-off sum_i c_i (x / width)^a_i (y / height)^b_i (empty: none), used where there
+  /// is no radial model.
+  std::vector<double> vignetting_poly2d;                ///< c_i
+  std::vector<std::array<int, 2>> vignetting_exp2d;     ///< (a_i, b_i)
   std::optional<double> focal_length_mm;
   std::optional<double> focal_plane_px_per_mm;  ///< x resolution, converted to pixels per mm
   std::optional<int> bits_per_sample;
@@ -74,7 +82,8 @@ struct CaptureMeta {
     if (focal_length_mm && focal_plane_px_per_mm) return *focal_length_mm * *focal_plane_px_per_mm;
     return std::nullopt;
   }
-  bool has_vignetting() const { return !vignetting_poly.empty() && vignetting_centre.has_value(); }
+  bool has_radial_vignetting() const { return !vignetting_poly.empty() && vignetting_centre.has_value(); }
+  bool has_vignetting() const { return has_radial_vignetting() || !vignetting_poly2d.empty(); }
 };
 
 /// Every key capture_meta_from_exiv2 looks at, for `exiv2 -K`.
@@ -91,7 +100,8 @@ inline const std::vector<std::string>& exiv2_metadata_keys() {
       "Exif.GPSInfo.GPSLongitudeRef", "Exif.GPSInfo.GPSAltitude", "Exif.GPSInfo.GPSAltitudeRef",
       "Xmp.drone-dji.GpsLatitude", "Xmp.drone-dji.GpsLongitude", "Xmp.drone-dji.GpsLongtitude",
       "Xmp.drone-dji.AbsoluteAltitude", "Xmp.exif.GPSLatitude", "Xmp.exif.GPSLongitude", "Xmp.exif.GPSAltitude",
-      "Xmp.exif.GPSAltitudeRef", "Xmp.Camera.BlackCurrent", "Xmp.drone-dji.ExposureTime", "Exif.Image.Make"};
+      "Xmp.exif.GPSAltitudeRef", "Xmp.Camera.BlackCurrent", "Xmp.drone-dji.ExposureTime", "Exif.Image.Make",
+      "Xmp.Camera.VignettingPolynomial2D", "Xmp.Camera.VignettingPolynomial2DName"};
   return keys;
 }
 
@@ -389,6 +399,26 @@ inline CaptureMeta capture_meta_from_exiv2(const std::map<std::string, std::stri
     if (!dji_data() || !m.vignetting_centre) camera_poly(VignettingKind::correction);
   } else if (!camera_poly(VignettingKind::falloff)) {
     dji_data();
+  }
+  if (!m.has_radial_vignetting()) {
+    if (auto c = first({"Xmp.Camera.VignettingPolynomial2D"})) {
+      const auto names = first({"Xmp.Camera.VignettingPolynomial2DName"});
+      if (!names) bad(*c, "usable without Xmp.Camera.VignettingPolynomial2DName, which gives its exponents");
+      const auto coeffs = detail::parse_number_list(c->second, 64);
+      if (!coeffs) bad(*c, "a list of up to 64 polynomial coefficients");
+      const auto exps = detail::parse_number_list(names->second, 128);
+      if (!exps || exps->size() != 2 * coeffs->size())
+        bad(*names, cat("two exponents (of x and y) for each of the ", coeffs->size(), " coefficients").c_str());
+      for (double e : *exps)
+        if (!(e >= 0 && e <= 16) || e != std::floor(e)) bad(*names, "whole exponents from 0 to 16");
+      m.vignetting_poly.clear();
+      m.vignetting_centre.reset();
+      m.vignetting_kind = VignettingKind::falloff;
+      m.vignetting_poly2d = *coeffs;
+      for (std::size_t i = 0; i < coeffs->size(); ++i)
+        m.vignetting_exp2d.push_back({int((*exps)[2 * i]), int((*exps)[2 * i + 1])});
+      m.source["vignetting"] = c->first;
+    }
   }
   if (auto e = first({"Exif.Photo.FocalLength", "Xmp.exif.FocalLength"})) {
     m.focal_length_mm = number(*e, "a focal length in mm (> 0)", true);

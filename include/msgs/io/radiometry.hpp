@@ -5,13 +5,15 @@
 //
 // with DN in the file's digital numbers, falloff(r) the vignetting polynomial 1 + k0 r + k1 r^2 + ...
 // at the pixel's distance r from the vignetting centre (MicaSense convention; a DJI-style
-// correction polynomial enters as 1 / p(r)), and `scale` one common factor per band for the whole
+// correction polynomial enters as 1 / p(r)) or the 2-D fall-off sum_i c_i (x/W)^a_i (y/H)^b_i of
+// Parrot Sequoia and MicaSense RedEdge-P / Altum-PT, and `scale` one common factor per band for the whole
 // capture set, chosen so that the brightest normalised value of the band is 1. Steps whose tags
 // are missing for some image of a band are left out for the whole band (mixing corrected and
 // uncorrected images would break the common scale); plan_band says which and why.
 #pragma once
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -39,6 +41,9 @@ struct FrameRadiometry {
   std::vector<double> vignetting_poly;
   double vignetting_cx = 0.0, vignetting_cy = 0.0;
   VignettingKind vignetting_kind = VignettingKind::falloff;
+  std::vector<double> vignetting_poly2d;             ///< 2-D fall-off coefficients (used when non-empty)
+  std::vector<std::array<int, 2>> vignetting_exp2d;  ///< their exponents of x / width and y / height
+  int width = 0, height = 0;  ///< the image's size, which the 2-D model's coordinates are divided by
   double scale = 1.0;  ///< common factor of the band
 };
 
@@ -67,19 +72,26 @@ inline BandPlan plan_band(const std::vector<CaptureMeta>& metas, const std::vect
   return plan;
 }
 
-/// The normalisation of one image under `steps` (scale 1; set it once the band's maximum is known).
-inline FrameRadiometry frame_radiometry(const CaptureMeta& m, const RadiometrySteps& steps, double dn_max) {
+/// The normalisation of one image of `width` x `height` pixels under `steps` (scale 1; set it once
+/// the band's maximum is known). The size matters only to a 2-D vignetting model.
+inline FrameRadiometry frame_radiometry(const CaptureMeta& m, const RadiometrySteps& steps, double dn_max,
+                                        int width = 0, int height = 0) {
   FrameRadiometry r;
   r.steps = steps;
   r.dn_max = dn_max;
+  r.width = width;
+  r.height = height;
   if (steps.black_level) r.black_level = *m.black_level;
   if (steps.exposure) r.exposure_s = *m.exposure_s;
   if (steps.gain) r.gain = *m.gain;
-  if (steps.vignetting) {
+  if (steps.vignetting && m.has_radial_vignetting()) {
     r.vignetting_poly = m.vignetting_poly;
     r.vignetting_cx = (*m.vignetting_centre)[0];
     r.vignetting_cy = (*m.vignetting_centre)[1];
     r.vignetting_kind = m.vignetting_kind;
+  } else if (steps.vignetting) {
+    r.vignetting_poly2d = m.vignetting_poly2d;
+    r.vignetting_exp2d = m.vignetting_exp2d;
   }
   return r;
 }
@@ -91,10 +103,28 @@ inline double vignetting_polynomial(const std::vector<double>& k, double r) {
   return 1.0 + acc;
 }
 
-/// How much darker the sensor records pixel (x, y) (0-based pixel indices, as MicaSense and DJI
-/// define r) than the centre: DN is proportional to radiance x vignetting_falloff. 1 without vignetting.
+/// sum_i c_i u^a_i v^b_i.
+inline double vignetting_polynomial_2d(const std::vector<double>& c, const std::vector<std::array<int, 2>>& e,
+                                       double u, double v) {
+  double acc = 0.0;
+  for (std::size_t i = 0; i < c.size() && i < e.size(); ++i) {
+    double t = c[i];
+    for (int k = 0; k < e[i][0]; ++k) t *= u;
+    for (int k = 0; k < e[i][1]; ++k) t *= v;
+    acc += t;
+  }
+  return acc;
+}
+
+/// How much darker the sensor records pixel (x, y) (0-based pixel indices, as MicaSense, DJI and
+/// Parrot define them) than the centre: DN is proportional to radiance x vignetting_falloff. 1
+/// without vignetting. The 2-D model is not normalised to 1 at the centre (the band scale absorbs
+/// its level) and needs r.width and r.height.
 inline double vignetting_falloff(const FrameRadiometry& r, double x, double y) {
-  if (!r.steps.vignetting || r.vignetting_poly.empty()) return 1.0;
+  if (!r.steps.vignetting) return 1.0;
+  if (!r.vignetting_poly2d.empty())
+    return vignetting_polynomial_2d(r.vignetting_poly2d, r.vignetting_exp2d, x / r.width, y / r.height);
+  if (r.vignetting_poly.empty()) return 1.0;
   const double p = vignetting_polynomial(r.vignetting_poly, std::hypot(x - r.vignetting_cx, y - r.vignetting_cy));
   return r.vignetting_kind == VignettingKind::falloff ? p : 1.0 / p;
 }
@@ -108,6 +138,21 @@ inline double relative_radiance(double dn, double x, double y, const FrameRadiom
 /// only darkens; 5% above 1 allows for a fitted polynomial's wobble near a weak vignette).
 inline constexpr double kMaxEdgeFalloff = 1.05;
 
+/// A lens darkens the image towards its edge. A model that says `where` is recorded brighter than
+/// the centre (`edge` times, above kMaxEdgeFalloff) has its convention the wrong way round (a
+/// correction read as a fall-off, or the reverse): applying it would double the vignetting
+/// instead of removing it. IoError naming `file` then.
+inline void check_edge_falloff(double edge, const std::string& model, const std::string& where,
+                               const std::filesystem::path& file) {
+  if (!(edge > kMaxEdgeFalloff)) return;
+  char times[32];
+  std::snprintf(times, sizeof times, "%.3g", edge);
+  fail(file, cat("the vignetting model (", model, ") makes ", where, " ", times,
+                 " times as bright as the centre, where a lens darkens it: its convention does not fit this",
+                 " camera (msgs reads DJI files' polynomials as corrections, all others as fall-offs);",
+                 " skip the metadata with --radiometry none"));
+}
+
 /// Check the parameters (finite, positive exposure and gain, a vignetting model that stays
 /// positive over the image and does not brighten its edge); IoError naming `file` otherwise.
 inline void check_radiometry(const FrameRadiometry& r, int width, int height, const std::filesystem::path& file) {
@@ -115,7 +160,25 @@ inline void check_radiometry(const FrameRadiometry& r, int width, int height, co
       !std::isfinite(r.exposure_s * r.gain) || !(r.scale > 0) || !std::isfinite(r.scale))
     fail(file, cat("radiometric parameters out of range (black level ", r.black_level, ", exposure ", r.exposure_s,
                    " s, gain ", r.gain, ", scale ", r.scale, ")"));
-  if (r.steps.vignetting) {
+  if (r.steps.vignetting && !r.vignetting_poly2d.empty()) {
+    if (r.width != width || r.height != height)
+      fail(file, cat("the 2-D vignetting model was set up for a ", r.width, "x", r.height, " image, this one is ", width,
+                     "x", height));
+    // Positive over the image (a 17 x 17 grid), and the corners no brighter than the centre.
+    const double centre = vignetting_falloff(r, 0.5 * (width - 1), 0.5 * (height - 1));
+    double corner = 0.0;
+    for (int j = 0; j <= 16; ++j)
+      for (int i = 0; i <= 16; ++i) {
+        const double x = (width - 1) * i / 16.0, y = (height - 1) * j / 16.0;
+        const double p = vignetting_falloff(r, x, y);
+        if (!(p > 1e-3 * centre) || !std::isfinite(p) || !(centre > 0))
+          fail(file, cat("the 2-D vignetting polynomial is ", p, " at pixel (", std::lround(x), ", ", std::lround(y),
+                         ") and ", centre, " at the centre (expected > 0 over the image;",
+                         " skip the metadata with --radiometry none)"));
+        if ((i == 0 || i == 16) && (j == 0 || j == 16)) corner = std::max(corner, p / centre);
+      }
+    check_edge_falloff(corner, "the 2-D fall-off polynomial", "a corner", file);
+  } else if (r.steps.vignetting) {
     // The polynomial in r is checked at the centre's nearest and farthest image points and in between.
     const double xs[] = {0.0, double(width - 1)}, ys[] = {0.0, double(height - 1)};
     double rmax = 0.0;
@@ -128,19 +191,9 @@ inline void check_radiometry(const FrameRadiometry& r, int width, int height, co
         fail(file, cat("vignetting polynomial is ", p, " at ", rr, " px from its centre (expected > 0 over the image;",
                        " skip the metadata with --radiometry none)"));
     }
-    // A lens darkens the image towards its edge. A model that says the farthest pixel is recorded
-    // brighter than the centre has its convention the wrong way round (a correction read as a
-    // fall-off, or the reverse): applying it would double the vignetting instead of removing it.
-    const double edge = vignetting_falloff(r, r.vignetting_cx + rmax, r.vignetting_cy);
-    if (edge > kMaxEdgeFalloff) {
-      char times[32];
-      std::snprintf(times, sizeof times, "%.3g", edge);
-      fail(file, cat("the vignetting model (", r.vignetting_kind == VignettingKind::falloff ? "a fall-off" : "a correction",
-                     " polynomial) makes the farthest pixel, ", std::lround(rmax), " px from its centre, ", times,
-                     " times as bright as the centre, where a lens darkens it: its convention does not fit this",
-                     " camera (msgs reads DJI files' polynomials as corrections, all others as fall-offs);",
-                     " skip the metadata with --radiometry none"));
-    }
+    check_edge_falloff(vignetting_falloff(r, r.vignetting_cx + rmax, r.vignetting_cy),
+                       r.vignetting_kind == VignettingKind::falloff ? "a fall-off polynomial" : "a correction polynomial",
+                       cat("the farthest pixel, ", std::lround(rmax), " px from its centre,"), file);
   }
 }
 

@@ -22,9 +22,10 @@
 //              Camera:VignettingPolynomial + Camera:VignettingCenter, exif:ExposureTime,
 //              exif:FocalLength, exif:FocalPlane*.
 //   sequoia    IMG_<yymmdd>_<hhmmss>_0001_GRE.TIF, _RED, _REG, _NIR, and _RGB.JPG. Like the real
-//              camera: no black level (DN = radiance x ...) and no MicaSense-style vignetting tags
-//              (the real one writes a 2-D polynomial msgs does not read), so the images carry no
-//              vignetting either; exposure, ISO, wavelengths and focal data as for MicaSense.
+//              camera: no black level (DN = radiance x ...), and the vignetting as a 2-D fall-off
+//              polynomial in x / width and y / height (Camera:VignettingPolynomial2D, its exponents
+//              in Camera:VignettingPolynomial2DName); exposure, ISO, wavelengths and focal data as
+//              for MicaSense.
 //   All three carry the capture's position (the RGB mount's centre as metres east, north and up
 //   of 51.98 N, 5.66 E, 20 m): DJI as drone-dji:GpsLatitude/GpsLongitude/AbsoluteAltitude, the
 //   others as exif:GPSLatitude/GPSLongitude ("DD,MM.mmmmmmK") and exif:GPSAltitude.
@@ -50,6 +51,7 @@
 #include "../io/file.hpp"
 #include "../io/image_io.hpp"
 #include "../io/match_pairs.hpp"
+#include "../io/radiometry.hpp"
 #include "dataset.hpp"
 #include "render.hpp"
 #include "scene.hpp"
@@ -299,7 +301,11 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
   sum.rgb_height = preset.rgb_height;
   sum.min_exposure_s = 1e9;
   sum.min_iso = 1 << 30;
-  const bool black = opt.camera != "sequoia", vignette = opt.camera != "sequoia";
+  const bool black = opt.camera != "sequoia", sequoia = opt.camera == "sequoia";
+  // Sequoia's 2-D fall-off 1 - 0.6 ((u - 1/2)^2 + (v - 1/2)^2) in u = x / width, v = y / height
+  // (0.7 in the corners), written out as the camera writes it: coefficients and exponent pairs.
+  const std::vector<double> c2d = {0.7, 0.6, 0.6, -0.6, -0.6};
+  const std::vector<std::array<int, 2>> e2d = {{0, 0}, {1, 0}, {0, 1}, {2, 0}, {0, 2}};
   const double black_level = opt.camera == "dji" ? 3200.0 : 4800.0;
   for (int ci = 0; ci < sum.captures; ++ci) {
     const Capture& cap = scene.captures[static_cast<std::size_t>(ci)];
@@ -352,7 +358,9 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
       for (int y = 0; y < cam.height; ++y)
         for (int x = 0; x < cam.width; ++x) {
           double fall = 1.0;
-          if (vignette) {
+          if (sequoia) {
+            fall = io::vignetting_polynomial_2d(c2d, e2d, double(x) / cam.width, double(y) / cam.height);
+          } else {
             double p = 0.0;
             const double r = std::hypot(x - vcx, y - vcy);
             for (std::size_t i = k.size(); i-- > 0;) p = (p + k[i]) * r;
@@ -380,7 +388,12 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
         elems.emplace_back("exif:ISOSpeedRatings", detail::rdf_seq({double(e.iso)}));
         if (black) attrs.emplace_back("Camera:BlackLevel", detail::g10(black_level));
       }
-      if (vignette) {  // Pix4D's keys (for DJI the same correction again, as the real camera writes it)
+      if (sequoia) {
+        std::vector<double> exps;
+        for (const auto& ab : e2d) exps.insert(exps.end(), {double(ab[0]), double(ab[1])});
+        elems.emplace_back("Camera:VignettingPolynomial2D", detail::rdf_seq(c2d));
+        elems.emplace_back("Camera:VignettingPolynomial2DName", detail::rdf_seq(exps));
+      } else {  // Pix4D's keys (for DJI the same correction again, as the real camera writes it)
         elems.emplace_back("Camera:VignettingCenter", detail::rdf_seq({vcx, vcy}));
         elems.emplace_back("Camera:VignettingPolynomial", detail::rdf_seq(k));
       }
