@@ -1009,11 +1009,14 @@ int run_import(const std::vector<std::string>& argv) {
                                   : it.rad.vignetting_kind == msgs::io::VignettingKind::falloff
                                       ? "fall-off: the image is divided by 1 + k0 r + k1 r^2 + ..."
                                       : "correction: the image is multiplied by 1 + k0 r + k1 r^2 + ...";
+      if (s.row_gradient) rad["row_gradient_a2_a3"] = {it.rad.row_a2, it.rad.row_a3};
       rad["scale"] = it.rad.scale;
       rad["dn_max"] = it.rad.dn_max;
-      rad["formula"] = it.radiometry_applied
-                           ? "value = (DN - black_level) / (exposure_s * gain * vignetting(r)) * scale"
-                           : "value = DN / dn_max (stored values kept: no radiometric metadata)";
+      rad["formula"] =
+          !it.radiometry_applied ? "value = DN / dn_max (stored values kept: no radiometric metadata)"
+          : s.row_gradient
+              ? "value = (DN - black_level) / (exposure_s * gain * vignetting(r) * (1 + a2 y / exposure_s - a3 y)) * scale"
+              : "value = (DN - black_level) / (exposure_s * gain * vignetting(r)) * scale";
       if (it.meta.band_name) rad["band_name"] = *it.meta.band_name;
       if (it.meta.wavelength_nm) rad["wavelength_nm"] = *it.meta.wavelength_nm;
       // Which exiv2 key each quantity came from, to check against the camera's documentation.

@@ -215,6 +215,8 @@ TEST_CASE("synth --raw: deterministic bytes, camera file names, metadata exiv2 r
   CHECK(*m.exposure_s == doctest::Approx(e.exposure_s).epsilon(1e-9));
   CHECK(*m.gain == doctest::Approx(e.gain()));
   CHECK(m.has_vignetting());
+  REQUIRE(m.row_gradient.has_value());
+  CHECK((*m.row_gradient)[0] == doctest::Approx(1.39479e-07 * 960 / 24));  // a2, scaled to 24 rows
   CHECK(*m.bits_per_sample == 16);
   CHECK(m.focal_px().has_value());
   // The capture's position: the RGB mount's camera centre, metres east/north/up of 51.98 N, 5.66 E, 20 m.
@@ -383,6 +385,7 @@ TEST_CASE("msgs import: synthetic MicaSense captures through exiv2 + COLMAP") {
     CHECK(rad["vignetting_model"].get<std::string>().rfind("fall-off", 0) == 0);
     CHECK(rad["metadata_keys"]["black_level"] == "Xmp.Camera.BlackLevel");
     CHECK(rad["metadata_keys"]["vignetting"] == "Xmp.Camera.VignettingPolynomial");
+    CHECK(rad["row_gradient_a2_a3"].size() == 2);
     CHECK(rad["exposure_s"].get<double>() > 0);
     CHECK(rad["gain"].get<double>() >= 1);
     const std::string src = f["source"];  // IMG_000N_B.tif
@@ -397,15 +400,22 @@ TEST_CASE("msgs import: synthetic MicaSense captures through exiv2 + COLMAP") {
     const auto truth = msgs::synth::detail::render_radiance(scene, cam, bands[bi].spectrum_channel, rs);
     const auto norm = msgs::io::read_image(dir / "ds" / f["file_path"].get<std::string>());
     const auto raw = msgs::io::read_image(dir / "raw" / src);
-    std::vector<double> rn, rr;
+    std::vector<double> rn, rr, rn_top, rn_bottom;
     for (int y = 0; y < truth.height; ++y)
       for (int x = 0; x < truth.width; ++x) {
         const double t = truth.at(x, y, 0), dn = raw.at(x, y, 0) * 65535.0;
         if (t < 0.02 || dn > 65000) continue;
         rn.push_back(norm.at(x, y, 0) / t);
         rr.push_back((dn - 4800.0) / t);
+        if (y < truth.height / 4) rn_top.push_back(rn.back());
+        if (y >= truth.height * 3 / 4) rn_bottom.push_back(rn.back());
       }
     REQUIRE(rn.size() > 1000);
+    // The row gradient (up to 26% in the last rows) and the vignetting are divided out: the top
+    // and the bottom quarter agree with the truth alike.
+    REQUIRE(rn_top.size() > 100);
+    REQUIRE(rn_bottom.size() > 100);
+    CHECK(median(rn_bottom) / median(rn_top) == doctest::Approx(1.0).epsilon(0.01));
     norm_ratio[f["mm_channel"]].push_back(median(rn));
     raw_ratio[f["mm_channel"]].push_back(median(rr));
   }

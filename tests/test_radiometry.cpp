@@ -209,6 +209,44 @@ TEST_CASE("capture meta: the 2-D vignetting polynomial of Parrot Sequoia and Mic
   CHECK_THROWS_WITH_AS(normalise_image(img, hole, "x.tif"), doctest::Contains("2-D vignetting polynomial is"), IoError);
 }
 
+TEST_CASE("radiometry: MicaSense's row gradient, from RadiometricCalibration") {
+  // A RedEdge's a1, a2, a3; row y is recorded 1 + a2 y / exposure - a3 y times as bright.
+  const std::string text = std::string(kMicaSense) +
+                           "Xmp.MicaSense.RadiometricCalibration          0.000145914, 1.39479e-07, 1.1714499999999999e-05\n";
+  const CaptureMeta m = parse_capture_meta(text, "IMG_0001_2.tif");
+  REQUIRE(m.row_gradient.has_value());
+  CHECK((*m.row_gradient)[1] == doctest::Approx(1.17145e-05));
+  const BandPlan p = plan_band({m, m}, {"a.tif", "b.tif"});
+  CHECK(p.steps.row_gradient);
+  FrameRadiometry r = frame_radiometry(m, p.steps, 65535, 1280, 960);
+  r.exposure_s = 0.0005;
+  const double row959 = 1 + 1.39479e-07 * 959 / 0.0005 - 1.17145e-05 * 959;  // 1.256
+  CHECK(row_gradient_factor(r, 959) == doctest::Approx(row959));
+  CHECK(row_gradient_factor(r, 0) == 1.0);
+  // Divided out: the same radiance in the first and the last row.
+  const double dn0 = r.black_level + 1000.0 * vignetting_falloff(r, 640, 0);
+  const double dn1 = r.black_level + 1000.0 * vignetting_falloff(r, 640, 959) * row959;
+  CHECK(relative_radiance(dn0, 640, 0, r) == doctest::Approx(relative_radiance(dn1, 640, 959, r)));
+
+  // Only MicaSense writes it: a band without it anywhere is missing nothing; a band where some
+  // images lack it leaves it out with a warning; without the exposure it cannot be applied.
+  const CaptureMeta plain = parse_capture_meta(kMicaSense, "a.tif");
+  CHECK(!plan_band({plain, plain}, {"a.tif", "b.tif"}).steps.row_gradient);
+  CHECK(plan_band({plain, plain}, {"a.tif", "b.tif"}).missing.empty());
+  const BandPlan some = plan_band({m, plain}, {"a.tif", "b.tif"});
+  CHECK(!some.steps.row_gradient);
+  CHECK(some.missing.count("row gradient (MicaSense RadiometricCalibration)") == 1);
+  CaptureMeta no_exposure = m;
+  no_exposure.exposure_s.reset();
+  CHECK(!plan_band({no_exposure}, {"a.tif"}).steps.row_gradient);
+  // Malformed, or a gradient that reaches zero within the image: errors naming the file.
+  CHECK_THROWS_WITH_AS(parse_capture_meta("Xmp.MicaSense.RadiometricCalibration 1, 2\n", "x.tif"),
+                       doctest::Contains("three numbers (a1, a2, a3)"), IoError);
+  r.row_a3 = 0.01;  // 1 + ... - 0.01 y: below zero long before row 959
+  CHECK_THROWS_WITH_AS(normalise_image(msgs::Image<float>(1280, 960, 1), r, "x.tif"),
+                       doctest::Contains("x.tif: the row gradient"), IoError);
+}
+
 TEST_CASE("radiometry: a vignetting model that brightens the image's edge is an error") {
   // DJI's correction read as a fall-off would double the vignetting; so would the reverse.
   FrameRadiometry r;

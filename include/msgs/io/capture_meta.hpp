@@ -24,6 +24,9 @@
 //                 (Parrot Sequoia, MicaSense RedEdge-P and Altum-PT: the fall-off
 //                 sum_i c_i (x / width)^a_i (y / height)^b_i, the exponents a_0, b_0, a_1, b_1, ...
 //                 in the Name key; the image is divided by it)
+//   row gradient  Xmp.MicaSense.RadiometricCalibration (a1, a2, a3: MicaSense's sensor records row y
+//                 brighter by 1 + a2 y / exposure - a3 y; a1, an absolute scale, is left to the band
+//                 scale)
 //   focal length  Exif.Photo.FocalLength, Xmp.exif.FocalLength (mm)
 //   focal plane   Exif.Photo.FocalPlaneXResolution / YResolution / ResolutionUnit and the same in
 //                 Xmp.exif (unit 2 inch, the EXIF default, 3 cm, 4 mm, 5 micrometre)
@@ -67,6 +70,8 @@ struct CaptureMeta {
   /// is no radial model.
   std::vector<double> vignetting_poly2d;                ///< c_i
   std::vector<std::array<int, 2>> vignetting_exp2d;     ///< (a_i, b_i)
+  /// MicaSense's a2, a3: DN grows along the row index y by 1 + a2 y / exposure_s - a3 y.
+  std::optional<std::array<double, 2>> row_gradient;
   std::optional<double> focal_length_mm;
   std::optional<double> focal_plane_px_per_mm;  ///< x resolution, converted to pixels per mm
   std::optional<int> bits_per_sample;
@@ -101,7 +106,8 @@ inline const std::vector<std::string>& exiv2_metadata_keys() {
       "Xmp.drone-dji.GpsLatitude", "Xmp.drone-dji.GpsLongitude", "Xmp.drone-dji.GpsLongtitude",
       "Xmp.drone-dji.AbsoluteAltitude", "Xmp.exif.GPSLatitude", "Xmp.exif.GPSLongitude", "Xmp.exif.GPSAltitude",
       "Xmp.exif.GPSAltitudeRef", "Xmp.Camera.BlackCurrent", "Xmp.drone-dji.ExposureTime", "Exif.Image.Make",
-      "Xmp.Camera.VignettingPolynomial2D", "Xmp.Camera.VignettingPolynomial2DName"};
+      "Xmp.Camera.VignettingPolynomial2D", "Xmp.Camera.VignettingPolynomial2DName",
+      "Xmp.MicaSense.RadiometricCalibration"};
   return keys;
 }
 
@@ -419,6 +425,12 @@ inline CaptureMeta capture_meta_from_exiv2(const std::map<std::string, std::stri
         m.vignetting_exp2d.push_back({int((*exps)[2 * i]), int((*exps)[2 * i + 1])});
       m.source["vignetting"] = c->first;
     }
+  }
+  if (auto e = first({"Xmp.MicaSense.RadiometricCalibration"})) {
+    const auto list = detail::parse_number_list(e->second, 3);
+    if (!list || list->size() != 3) bad(*e, "three numbers (a1, a2, a3)");
+    m.row_gradient = std::array<double, 2>{(*list)[1], (*list)[2]};
+    m.source["row_gradient"] = e->first;
   }
   if (auto e = first({"Exif.Photo.FocalLength", "Xmp.exif.FocalLength"})) {
     m.focal_length_mm = number(*e, "a focal length in mm (> 0)", true);

@@ -1,12 +1,13 @@
 // include/msgs/io/radiometry.hpp
 // Radiometric normalisation of raw multi-band captures to relative radiance:
 //
-//   L(x, y) = (DN - black_level) / (exposure_s * gain * falloff(r)) * scale
+//   L(x, y) = (DN - black_level) / (exposure_s * gain * falloff(r) * row(y)) * scale
 //
 // with DN in the file's digital numbers, falloff(r) the vignetting polynomial 1 + k0 r + k1 r^2 + ...
 // at the pixel's distance r from the vignetting centre (MicaSense convention; a DJI-style
 // correction polynomial enters as 1 / p(r)) or the 2-D fall-off sum_i c_i (x/W)^a_i (y/H)^b_i of
-// Parrot Sequoia and MicaSense RedEdge-P / Altum-PT, and `scale` one common factor per band for the whole
+// Parrot Sequoia and MicaSense RedEdge-P / Altum-PT, row(y) = 1 + a2 y / exposure_s - a3 y
+// MicaSense's row gradient (1 for other cameras), and `scale` one common factor per band for the whole
 // capture set, chosen so that the brightest normalised value of the band is 1. Steps whose tags
 // are missing for some image of a band are left out for the whole band (mixing corrected and
 // uncorrected images would break the common scale); plan_band says which and why.
@@ -29,8 +30,8 @@ namespace msgs::io {
 
 /// Which corrections are applied to a band.
 struct RadiometrySteps {
-  bool black_level = false, exposure = false, gain = false, vignetting = false;
-  bool any() const { return black_level || exposure || gain || vignetting; }
+  bool black_level = false, exposure = false, gain = false, vignetting = false, row_gradient = false;
+  bool any() const { return black_level || exposure || gain || vignetting || row_gradient; }
 };
 
 /// The normalisation of one image.
@@ -44,6 +45,7 @@ struct FrameRadiometry {
   std::vector<double> vignetting_poly2d;             ///< 2-D fall-off coefficients (used when non-empty)
   std::vector<std::array<int, 2>> vignetting_exp2d;  ///< their exponents of x / width and y / height
   int width = 0, height = 0;  ///< the image's size, which the 2-D model's coordinates are divided by
+  double row_a2 = 0.0, row_a3 = 0.0;  ///< MicaSense's row gradient (used when steps.row_gradient)
   double scale = 1.0;  ///< common factor of the band
 };
 
@@ -69,6 +71,12 @@ inline BandPlan plan_band(const std::vector<CaptureMeta>& metas, const std::vect
   plan.steps.exposure = check("exposure time", [](const CaptureMeta& m) { return m.exposure_s.has_value(); });
   plan.steps.gain = check("gain/ISO", [](const CaptureMeta& m) { return m.gain.has_value(); });
   plan.steps.vignetting = check("vignetting polynomial+centre", [](const CaptureMeta& m) { return m.has_vignetting(); });
+  // MicaSense's row gradient needs the exposure time. Only MicaSense writes it, so a band none of
+  // whose images has it is not missing anything.
+  if (std::any_of(metas.begin(), metas.end(), [](const CaptureMeta& m) { return m.row_gradient.has_value(); }))
+    plan.steps.row_gradient =
+        check("row gradient (MicaSense RadiometricCalibration)", [](const CaptureMeta& m) { return m.row_gradient.has_value(); }) &&
+        plan.steps.exposure;
   return plan;
 }
 
@@ -92,6 +100,10 @@ inline FrameRadiometry frame_radiometry(const CaptureMeta& m, const RadiometrySt
   } else if (steps.vignetting) {
     r.vignetting_poly2d = m.vignetting_poly2d;
     r.vignetting_exp2d = m.vignetting_exp2d;
+  }
+  if (steps.row_gradient) {
+    r.row_a2 = (*m.row_gradient)[0];
+    r.row_a3 = (*m.row_gradient)[1];
   }
   return r;
 }
@@ -129,9 +141,15 @@ inline double vignetting_falloff(const FrameRadiometry& r, double x, double y) {
   return r.vignetting_kind == VignettingKind::falloff ? p : 1.0 / p;
 }
 
+/// How much brighter MicaSense's sensor records row y than row 0: 1 + a2 y / exposure_s - a3 y
+/// (1 without that step).
+inline double row_gradient_factor(const FrameRadiometry& r, double y) {
+  return r.steps.row_gradient ? 1.0 + r.row_a2 * y / r.exposure_s - r.row_a3 * y : 1.0;
+}
+
 /// Relative radiance of digital number `dn` at pixel (x, y), before the band scale.
 inline double relative_radiance(double dn, double x, double y, const FrameRadiometry& r) {
-  return (dn - r.black_level) / (r.exposure_s * r.gain * vignetting_falloff(r, x, y));
+  return (dn - r.black_level) / (r.exposure_s * r.gain * vignetting_falloff(r, x, y) * row_gradient_factor(r, y));
 }
 
 /// The largest fall-off factor a vignetting model may give the image's farthest pixel (a lens
@@ -160,6 +178,14 @@ inline void check_radiometry(const FrameRadiometry& r, int width, int height, co
       !std::isfinite(r.exposure_s * r.gain) || !(r.scale > 0) || !std::isfinite(r.scale))
     fail(file, cat("radiometric parameters out of range (black level ", r.black_level, ", exposure ", r.exposure_s,
                    " s, gain ", r.gain, ", scale ", r.scale, ")"));
+  // The row gradient is linear in y: positive at the first and last row means positive on all.
+  for (const double y : {0.0, double(height - 1)}) {
+    const double g = row_gradient_factor(r, y);
+    if (!(g > 1e-3) || !std::isfinite(g))
+      fail(file, cat("the row gradient 1 + a2 y / exposure - a3 y is ", g, " at row ", std::lround(y),
+                     " (a2 ", r.row_a2, ", a3 ", r.row_a3, ", exposure ", r.exposure_s,
+                     " s; expected > 0; skip the metadata with --radiometry none)"));
+  }
   if (r.steps.vignetting && !r.vignetting_poly2d.empty()) {
     if (r.width != width || r.height != height)
       fail(file, cat("the 2-D vignetting model was set up for a ", r.width, "x", r.height, " image, this one is ", width,
@@ -205,7 +231,7 @@ inline Image<float> normalise_image(const Image<float>& raw, const FrameRadiomet
   Image<float> out(raw.width, raw.height, raw.channels);
   for (int y = 0; y < raw.height; ++y)
     for (int x = 0; x < raw.width; ++x) {
-      const double k = r.scale / (r.exposure_s * r.gain * vignetting_falloff(r, x, y));
+      const double k = r.scale / (r.exposure_s * r.gain * vignetting_falloff(r, x, y) * row_gradient_factor(r, y));
       for (int c = 0; c < raw.channels; ++c) {
         const double dn = double(raw.at(x, y, c)) * r.dn_max;
         out.at(x, y, c) = float(std::max(0.0, (dn - r.black_level) * k));

@@ -10,7 +10,9 @@
 //   micasense  IMG_0001_1.tif .. IMG_0001_5.tif (1 Blue, 2 Green, 3 Red, 4 NIR, 5 RedEdge); no RGB
 //              camera. XMP: Camera:BandName, Camera:CentralWavelength, Camera:WavelengthFWHM,
 //              Camera:VignettingCenter, Camera:VignettingPolynomial (fall-off 1 + k0 r + ... in
-//              pixels), Camera:BlackLevel, exif:ExposureTime, exif:ISOSpeedRatings, exif:FocalLength,
+//              pixels), Camera:BlackLevel, MicaSense:RadiometricCalibration (a1, a2, a3: the sensor
+//              records row y brighter by 1 + a2 y / exposure - a3 y; a real RedEdge's values,
+//              scaled to the image height), exif:ExposureTime, exif:ISOSpeedRatings, exif:FocalLength,
 //              exif:FocalPlaneXResolution/YResolution/ResolutionUnit (4 = mm). Real MicaSense files
 //              keep exposure, ISO, focal length and black level in EXIF IFDs instead; the importer
 //              reads both places.
@@ -203,7 +205,8 @@ inline std::string xmp_packet(const std::vector<std::pair<std::string, std::stri
       "    xmlns:Camera=\"http://pix4d.com/camera/1.0/\"\n"
       "    xmlns:exif=\"http://ns.adobe.com/exif/1.0/\"\n"
       "    xmlns:tiff=\"http://ns.adobe.com/tiff/1.0/\"\n"
-      "    xmlns:drone-dji=\"http://www.dji.com/drone-dji/1.0/\"";
+      "    xmlns:drone-dji=\"http://www.dji.com/drone-dji/1.0/\"\n"
+      "    xmlns:MicaSense=\"http://micasense.com/MicaSense/1.0/\"";
   for (const auto& [k, v] : attrs) s += "\n    " + k + "=\"" + v + "\"";
   s += ">\n";
   for (const auto& [k, v] : elems) s += "   <" + k + ">" + v + "</" + k + ">\n";
@@ -301,7 +304,10 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
   sum.rgb_height = preset.rgb_height;
   sum.min_exposure_s = 1e9;
   sum.min_iso = 1 << 30;
-  const bool black = opt.camera != "sequoia", sequoia = opt.camera == "sequoia";
+  const bool black = opt.camera != "sequoia", sequoia = opt.camera == "sequoia", micasense = opt.camera == "micasense";
+  // MicaSense's row gradient: a RedEdge's a2 and a3 (for its 960 rows), scaled to this height so
+  // that the last row gains what the camera's does (6-26% at these exposures).
+  const double row_a2 = 1.39479e-07 * 960.0 / preset.ms_height, row_a3 = 1.17145e-05 * 960.0 / preset.ms_height;
   // Sequoia's 2-D fall-off 1 - 0.6 ((u - 1/2)^2 + (v - 1/2)^2) in u = x / width, v = y / height
   // (0.7 in the corners), written out as the camera writes it: coefficients and exponent pairs.
   const std::vector<double> c2d = {0.7, 0.6, 0.6, -0.6, -0.6};
@@ -366,7 +372,8 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
             for (std::size_t i = k.size(); i-- > 0;) p = (p + k[i]) * r;
             fall = opt.camera == "dji" ? 1.0 / (1.0 + p) : 1.0 + p;
           }
-          const double v = bl + double(L.at(x, y, 0)) * e.exposure_s * e.gain() * fall * b.sensitivity;
+          const double row = micasense ? 1.0 + row_a2 * y / e.exposure_s - row_a3 * y : 1.0;
+          const double v = bl + double(L.at(x, y, 0)) * e.exposure_s * e.gain() * fall * row * b.sensitivity;
           dn[std::size_t(y) * std::size_t(cam.width) + std::size_t(x)] =
               static_cast<std::uint16_t>(std::lround(std::clamp(v, 0.0, 65535.0)));
         }
@@ -387,6 +394,7 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
       } else {
         elems.emplace_back("exif:ISOSpeedRatings", detail::rdf_seq({double(e.iso)}));
         if (black) attrs.emplace_back("Camera:BlackLevel", detail::g10(black_level));
+        if (micasense) elems.emplace_back("MicaSense:RadiometricCalibration", detail::rdf_seq({1.45914e-04, row_a2, row_a3}));
       }
       if (sequoia) {
         std::vector<double> exps;
