@@ -709,11 +709,7 @@ int run_import(const std::vector<std::string>& argv) {
       for (const Item& it : items) {
         if (!it.meta.wavelength_nm || msgs::io::wavelength_fits_band(it.band, *it.meta.wavelength_nm)) continue;
         const msgs::io::BandWindow w = msgs::io::band_window(it.band);
-        const auto g = [](double v) {
-          char buf[32];
-          std::snprintf(buf, sizeof buf, "%g", v);
-          return std::string(buf);
-        };
+        const auto g = [](double v) { return msgs::io::short_number(v); };
         fail(images / it.source, it.meta.source.at("wavelength_nm"),
              cat("the camera says ", g(*it.meta.wavelength_nm), " nm", it.meta.band_name ? " (" + *it.meta.band_name + ")" : "",
                  ", but ", scan.camera == "patterns" ? std::string("--bands") : "the " + scan.camera + " file name",

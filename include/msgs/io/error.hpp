@@ -3,6 +3,7 @@
 // naming the file, the field and what was expected.
 #pragma once
 
+#include <cstdio>
 #include <filesystem>
 #include <stdexcept>
 #include <string>
@@ -37,6 +38,14 @@ std::string cat(const A&... pieces) {
   std::string s;
   (detail::append_piece(s, pieces), ...);
   return s;
+}
+
+/// A number for a message, to `digits` significant digits without trailing zeros ("%g"): 540
+/// rather than cat's "540.000000". Where the digits matter (values written into files) use cat.
+inline std::string short_number(double v, int digits = 6) {
+  char buf[40];
+  std::snprintf(buf, sizeof buf, "%.*g", digits, v);
+  return buf;
 }
 
 /// Throw IoError("<file>: <what>").

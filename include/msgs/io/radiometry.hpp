@@ -16,7 +16,6 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <cstdio>
 #include <filesystem>
 #include <map>
 #include <string>
@@ -147,9 +146,15 @@ inline double row_gradient_factor(const FrameRadiometry& r, double y) {
   return r.steps.row_gradient ? 1.0 + r.row_a2 * y / r.exposure_s - r.row_a3 * y : 1.0;
 }
 
+/// What the sensor records at pixel (x, y) per unit of relative radiance, above the black level:
+/// exposure x gain x vignetting fall-off x row gradient.
+inline double sensor_response(const FrameRadiometry& r, double x, double y) {
+  return r.exposure_s * r.gain * vignetting_falloff(r, x, y) * row_gradient_factor(r, y);
+}
+
 /// Relative radiance of digital number `dn` at pixel (x, y), before the band scale.
 inline double relative_radiance(double dn, double x, double y, const FrameRadiometry& r) {
-  return (dn - r.black_level) / (r.exposure_s * r.gain * vignetting_falloff(r, x, y) * row_gradient_factor(r, y));
+  return (dn - r.black_level) / sensor_response(r, x, y);
 }
 
 /// The largest fall-off factor a vignetting model may give the image's farthest pixel (a lens
@@ -163,9 +168,7 @@ inline constexpr double kMaxEdgeFalloff = 1.05;
 inline void check_edge_falloff(double edge, const std::string& model, const std::string& where,
                                const std::filesystem::path& file) {
   if (!(edge > kMaxEdgeFalloff)) return;
-  char times[32];
-  std::snprintf(times, sizeof times, "%.3g", edge);
-  fail(file, cat("the vignetting model (", model, ") makes ", where, " ", times,
+  fail(file, cat("the vignetting model (", model, ") makes ", where, " ", short_number(edge, 3),
                  " times as bright as the centre, where a lens darkens it: its convention does not fit this",
                  " camera (msgs reads DJI files' polynomials as corrections, all others as fall-offs);",
                  " skip the metadata with --radiometry none"));
@@ -231,7 +234,7 @@ inline Image<float> normalise_image(const Image<float>& raw, const FrameRadiomet
   Image<float> out(raw.width, raw.height, raw.channels);
   for (int y = 0; y < raw.height; ++y)
     for (int x = 0; x < raw.width; ++x) {
-      const double k = r.scale / (r.exposure_s * r.gain * vignetting_falloff(r, x, y) * row_gradient_factor(r, y));
+      const double k = r.scale / sensor_response(r, x, y);
       for (int c = 0; c < raw.channels; ++c) {
         const double dn = double(raw.at(x, y, c)) * r.dn_max;
         out.at(x, y, c) = float(std::max(0.0, (dn - r.black_level) * k));
