@@ -653,6 +653,7 @@ TEST_CASE("msgs import: bands that match only among themselves come in through a
     const auto& rad = f["radiometry"];
     if (rad["applied"] != true) continue;  // the RGB camera's frames
     CHECK(rad["metadata_keys"]["black_level"] == "Xmp.Camera.BlackCurrent");
+    CHECK(rad["metadata_keys"]["exposure_s"] == "Xmp.drone-dji.ExposureTime");
     CHECK(rad["metadata_keys"]["vignetting"] == "Xmp.drone-dji.VignettingData");
     CHECK(rad["vignetting_model"].get<std::string>().rfind("correction", 0) == 0);
   }

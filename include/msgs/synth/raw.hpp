@@ -18,7 +18,8 @@
 //              reads both places.
 //   dji        DJI_<datetime>_0001_MS_G.TIF, _MS_R, _MS_RE, _MS_NIR, and _D.JPG (8-bit sRGB), as a
 //              Mavic 3M names them. XMP: Camera:BandName, Camera:CentralWavelength,
-//              Camera:BlackCurrent (the Mavic 3M's black level), drone-dji:SensorGain,
+//              Camera:BlackCurrent (the Mavic 3M's black level), drone-dji:ExposureTime
+//              (microseconds), drone-dji:SensorGain,
 //              drone-dji:VignettingData (a correction polynomial that multiplies the image),
 //              drone-dji:CalibratedOpticalCenterX/Y, the same correction again as
 //              Camera:VignettingPolynomial + Camera:VignettingCenter, exif:ExposureTime,
@@ -381,6 +382,7 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
       attrs.emplace_back("Camera:WavelengthFWHM", detail::g10(b.fwhm_nm));
       attrs.emplace_back("exif:ExposureTime", io::cat("1/", std::lround(1.0 / e.exposure_s)));
       if (opt.camera == "dji") {
+        attrs.emplace_back("drone-dji:ExposureTime", detail::g10(e.exposure_s * 1e6));  // microseconds
         attrs.emplace_back("Camera:BlackCurrent", detail::g10(black_level));
         attrs.emplace_back("drone-dji:SensorGain", detail::g10(e.gain()));
         std::string kv;
