@@ -48,7 +48,7 @@ using msgs::io::fail;
 constexpr const char* kUsage =
     "usage: msgs import --images DIR --out DIR [--camera auto|micasense|dji|sequoia]\n"
     "                   [--bands PATTERN=ID,...] [--eval-every N] [--camera-model M]\n"
-    "                   [--radiometry auto|none] [--matching exhaustive|window|gps]\n"
+    "                   [--radiometry auto|none|reflectance] [--matching exhaustive|window|gps]\n"
     "                   [--window N] [--neighbours K] [--sift-threshold T] [--ba-tolerance X]\n"
     "                   [--merge-models on|off] [--rig on|off] [--allow-partial] [--force]\n"
     "                   [--colmap BIN] [--exiv2 BIN] [--keep-work]\n"
@@ -68,9 +68,10 @@ constexpr const char* kUsage =
     "     in transforms.json. Steps whose tags are missing are left out for that band, with a\n"
     "     warning naming the files. A vignetting polynomial is the correction the image is\n"
     "     multiplied by in DJI files and the fall-off it is divided by in all others (keys:\n"
-    "     msgs/io/capture_meta.hpp). The values are relative radiance, not reflectance (no\n"
-    "     irradiance sensor or panel is read): indices such as NDVI computed from them are\n"
-    "     shifted from reflectance-based ones (see the README for a panel's conversion).\n"
+    "     msgs/io/capture_meta.hpp). These values are relative radiance, not reflectance: indices\n"
+    "     such as NDVI computed from them are shifted from reflectance-based ones. With\n"
+    "     --radiometry reflectance, MicaSense files give reflectance instead: pi x radiance (a1\n"
+    "     of RadiometricCalibration) / the horizontal irradiance of the DLS 2 light sensor.\n"
     "  3. Poses with COLMAP on the CPU (feature_extractor with one camera per band and the focal\n"
     "     length from the metadata as prior; matching of every pair, of nearby captures by GPS or\n"
     "     of a window of captures; mapper) on contrast-stretched 8-bit copies; the largest model\n"
@@ -97,8 +98,11 @@ constexpr const char* kUsage =
     "                      e.g. --bands 'IMG_*_2.tif=MS_G,IMG_*_3.tif=MS_R,IMG_*_5.tif=MS_RE,IMG_*_4.tif=MS_NIR'\n"
     "  --eval-every N      every N-th capture (all its bands) goes to eval (default 10; 0: none)\n"
     "  --camera-model M    COLMAP camera model: OPENCV (default), PINHOLE, SIMPLE_RADIAL, RADIAL\n"
-    "  --radiometry R      auto (default: use the metadata) or none (keep the stored values; the\n"
-    "                      focal lengths in the metadata are still COLMAP's priors)\n"
+    "  --radiometry R      auto (default: use the metadata), none (keep the stored values; the\n"
+    "                      focal lengths in the metadata are still COLMAP's priors) or reflectance\n"
+    "                      (pi x radiance / irradiance from MicaSense's a1 and its DLS 2 light\n"
+    "                      sensor, no band scale: every band image must carry them, else an error;\n"
+    "                      values above 1 are clipped, with a warning)\n"
     "  --matching M        image pairs COLMAP matches: exhaustive (default: every pair; the time\n"
     "                      grows with the square of the image count), window (the bands of a\n"
     "                      capture with each other, and each band with the same band of the next\n"
@@ -562,8 +566,9 @@ int run_import(const std::vector<std::string>& argv) {
   if (!model_params.count(model))
     throw msgs::cli::UsageError("--camera-model expects OPENCV, PINHOLE, SIMPLE_RADIAL or RADIAL, got '" + model + "'");
   const std::string radiometry = args.get("radiometry", "auto");
-  if (radiometry != "auto" && radiometry != "none")
-    throw msgs::cli::UsageError("--radiometry expects auto or none, got '" + radiometry + "'");
+  if (radiometry != "auto" && radiometry != "none" && radiometry != "reflectance")
+    throw msgs::cli::UsageError("--radiometry expects auto, none or reflectance, got '" + radiometry + "'");
+  const bool reflectance = radiometry == "reflectance";
   const std::string matching = args.get("matching", "exhaustive");
   if (matching != "exhaustive" && matching != "window" && matching != "gps")
     throw msgs::cli::UsageError("--matching expects exhaustive, window or gps, got '" + matching + "'");
@@ -672,12 +677,12 @@ int run_import(const std::vector<std::string>& argv) {
     // Without exiv2 the import still runs (stored values, guessed focal lengths) unless it needs
     // the positions.
     if (!msgs::cli::find_program(exiv2_arg)) {
-      if (matching == "gps")
-        fail(exiv2_arg, "--matching gps reads the positions with exiv2, which was not found (install it: "
-                        "apt-get install exiv2, or point --exiv2 at it)");
+      if (matching == "gps" || reflectance)
+        fail(exiv2_arg, cat(matching == "gps" ? "--matching gps reads the positions" : "--radiometry reflectance reads the metadata",
+                            " with exiv2, which was not found (install it: apt-get install exiv2, or point --exiv2 at it)"));
       std::printf("  warning: exiv2 not found (install it: apt-get install exiv2); keeping the stored values%s "
                   "and letting COLMAP guess the focal lengths\n",
-                  radiometry == "auto" ? " (no radiometric normalisation)" : "");
+                  radiometry != "none" ? " (no radiometric normalisation)" : "");
     } else {
       have_meta = true;
       const std::size_t batch = 64;
@@ -722,21 +727,20 @@ int run_import(const std::vector<std::string>& argv) {
     }
   }
 
-  // ---- 3. radiometry: plan per band, pass 1 for the band maxima, pass 2 writes
+  // ---- 3. radiometry: plan per band, pass 1 for the band maxima (relative radiance), pass 2 writes
   std::map<std::string, std::vector<std::size_t>> by_band;
   for (std::size_t i = 0; i < items.size(); ++i) by_band[items[i].band].push_back(i);
-  std::map<std::string, double> band_max;
   for (const auto& [band, idx] : by_band) {
     if (band == "D") continue;
     msgs::io::RadiometrySteps steps;
-    if (have_meta && radiometry == "auto") {
+    if (have_meta && radiometry != "none") {
       std::vector<msgs::io::CaptureMeta> metas;
       std::vector<fs::path> srcs;
       for (std::size_t i : idx) {
         metas.push_back(items[i].meta);
         srcs.push_back(items[i].source);
       }
-      const auto plan = msgs::io::plan_band(metas, srcs);
+      const auto plan = msgs::io::plan_band(metas, srcs, reflectance);
       steps = plan.steps;
       if (!plan.missing.empty()) {
         std::string what;
@@ -745,6 +749,17 @@ int run_import(const std::vector<std::string>& argv) {
           for (const auto& f : lacking) names.push_back(f.generic_string());
           what += cat("\n    ", tag, " missing in ", lacking.size(), " of ", idx.size(), " files: ", list_some(names, 3));
         }
+        // Why a light-sensor reading was not taken (a firmware known to write it wrongly).
+        for (std::size_t i : idx)
+          if (!items[i].meta.irradiance_problem.empty()) {
+            what += cat("\n    (", items[i].source.generic_string(), ": ", items[i].meta.irradiance_problem, ")");
+            break;
+          }
+        if (reflectance)
+          fail(images / srcs[0], cat("--radiometry reflectance needs every step, MicaSense's radiance calibration and",
+                                     " the DLS 2 irradiance in every image of band ", band, ":", what,
+                                     "\n  msgs computes reflectance from MicaSense's light sensor only; use",
+                                     " --radiometry auto for relative radiance"));
         std::printf("  warning: %s: corrections left out for the whole band (%s):%s\n", band.c_str(),
                     steps.any() ? "the others are applied" : "stored values kept", what.c_str());
       }
@@ -762,12 +777,15 @@ int run_import(const std::vector<std::string>& argv) {
       it.height = raw.height;
       it.rad = msgs::io::frame_radiometry(it.meta, steps, dn_max, raw.width, raw.height);
       it.radiometry_applied = steps.any();
-      if (it.radiometry_applied) mx = std::max(mx, double(msgs::io::max_value(msgs::io::normalise_image(raw, it.rad, src))));
+      if (it.radiometry_applied && !reflectance)
+        mx = std::max(mx, double(msgs::io::max_value(msgs::io::normalise_image(raw, it.rad, src))));
     }
-    band_max[band] = mx;
     for (std::size_t i : idx)
-      items[i].rad.scale = items[i].radiometry_applied ? msgs::io::band_scale(mx) : 1.0 / items[i].rad.dn_max;
+      items[i].rad.scale = reflectance                 ? msgs::io::reflectance_scale(items[i].rad)
+                           : items[i].radiometry_applied ? msgs::io::band_scale(mx)
+                                                         : 1.0 / items[i].rad.dn_max;
   }
+  std::map<std::string, std::array<std::size_t, 2>> clipped;  // band -> (pixels above 1, pixels)
   for (Item& it : items) {
     const fs::path src = images / it.source;
     const msgs::Image<float> raw = msgs::io::read_image(src);
@@ -782,10 +800,21 @@ int run_import(const std::vector<std::string>& argv) {
       continue;
     }
     msgs::Image<float> norm = msgs::io::normalise_image(raw, it.rad, src);
-    for (float& v : norm.data) v = std::min(v, 1.0f);
+    auto& [above, pixels] = clipped[it.band];
+    pixels += norm.data.size();
+    for (float& v : norm.data) {
+      above += v > 1.0f;
+      v = std::min(v, 1.0f);
+    }
     msgs::io::write_png16(layout / "images" / it.out_name, norm);
     msgs::io::write_png8(work / "images" / it.colmap_name, sift_copy(norm));
   }
+  if (reflectance)  // (relative radiance peaks at 1 by construction)
+    for (const auto& [band, c] : clipped)
+      if (c[0] > 0)
+        std::printf("  warning: %s: %.3g%% of the pixels have a reflectance above 1, clipped to 1 (specular highlights,"
+                    " or an irradiance that does not fit the light the camera saw)\n",
+                    band.c_str(), 100.0 * double(c[0]) / double(c[1]));
   std::printf("  radiometry and copies: %zu images in %.1f s\n", items.size(), since(t_meta));
   std::fflush(stdout);
 
@@ -1009,10 +1038,16 @@ int run_import(const std::vector<std::string>& argv) {
                                       ? "fall-off: the image is divided by 1 + k0 r + k1 r^2 + ..."
                                       : "correction: the image is multiplied by 1 + k0 r + k1 r^2 + ...";
       if (s.row_gradient) rad["row_gradient_a2_a3"] = {it.rad.row_a2, it.rad.row_a3};
+      if (s.irradiance) {
+        rad["radiance_a1"] = it.rad.radiance_a1;
+        rad["irradiance_w_m2_nm"] = it.rad.irradiance;
+      }
       rad["scale"] = it.rad.scale;
       rad["dn_max"] = it.rad.dn_max;
       rad["formula"] =
           !it.radiometry_applied ? "value = DN / dn_max (stored values kept: no radiometric metadata)"
+          : s.irradiance ? "reflectance = (DN - black_level) / (exposure_s * gain * vignetting(r) * "
+                           "(1 + a2 y / exposure_s - a3 y) * irradiance) * scale, scale = pi * a1 / (dn_max + 1)"
           : s.row_gradient
               ? "value = (DN - black_level) / (exposure_s * gain * vignetting(r) * (1 + a2 y / exposure_s - a3 y)) * scale"
               : "value = (DN - black_level) / (exposure_s * gain * vignetting(r)) * scale";

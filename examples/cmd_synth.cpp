@@ -16,7 +16,7 @@ namespace {
 constexpr const char* kUsage =
     "usage: msgs synth --preset tiny|small|medium --out DIR [--seed S] [--force]\n"
     "       msgs synth --raw micasense|dji|sequoia --out DIR [--preset P] [--captures N] [--width W]\n"
-    "                  [--seed S] [--force]\n"
+    "                  [--light-variation V] [--seed S] [--force]\n"
     "\n"
     "Ray-trace a procedural outdoor scene (lawn, soil, trees, solar panels, pond, painted pad) seen\n"
     "by a 5-camera drone rig (RGB + G, R, RE, NIR) and write it in the public multi-spectral dataset\n"
@@ -32,9 +32,12 @@ constexpr const char* kUsage =
     "DJI_<datetime>_0001_MS_G.TIF ... _D.JPG, Parrot Sequoia IMG_<date>_<time>_0001_GRE.TIF ... _RGB.JPG),\n"
     "16-bit TIFFs with per-capture exposure time and ISO, black level and vignetting in the digital\n"
     "numbers, and the camera's metadata tags as XMP (band, wavelength, black level, exposure, ISO/gain,\n"
-    "vignetting polynomial and centre, focal length and focal-plane resolution).\n"
+    "vignetting polynomial and centre, focal length and focal-plane resolution; MicaSense files\n"
+    "also the radiance calibration and the DLS 2 light sensor's irradiance).\n"
     "  --captures N number of captures (default: the preset's)\n"
-    "  --width W    multispectral image width in pixels (height 3/4 of it, RGB 1.5x; default: the preset's)\n";
+    "  --width W    multispectral image width in pixels (height 3/4 of it, RGB 1.5x; default: the preset's)\n"
+    "  --light-variation V  the sunlight of each capture varies by up to +-V (0 to 0.9; default 0),\n"
+    "               as under passing clouds (`msgs import --radiometry reflectance` divides it out)\n";
 
 int run_raw(const msgs::cli::Args& args) {
   msgs::synth::RawOptions opt;
@@ -45,6 +48,9 @@ int run_raw(const msgs::cli::Args& args) {
   opt.seed = static_cast<std::uint64_t>(seed);
   opt.captures = static_cast<int>(std::clamp(captures, -1L, 1000000L));
   opt.width = static_cast<int>(std::clamp(width, -1L, 1000000L));
+  opt.light_variation = args.number("light-variation", 0.0);
+  if (!(opt.light_variation >= 0.0 && opt.light_variation <= 0.9))
+    throw msgs::cli::UsageError("option --light-variation expects a number from 0 to 0.9");
   opt.overwrite = args.flag("force");
   const std::string out = args.require("out");
   msgs::synth::RawSummary s;
@@ -65,14 +71,15 @@ int run_raw(const msgs::cli::Args& args) {
 }
 
 int run_synth(const std::vector<std::string>& argv) {
-  const msgs::cli::Args args(argv, {"preset", "out", "seed", "raw", "captures", "width"}, {"force", "help"});
+  const msgs::cli::Args args(argv, {"preset", "out", "seed", "raw", "captures", "width", "light-variation"}, {"force", "help"});
   if (args.flag("help")) {
     std::fputs(kUsage, stdout);
     return 0;
   }
   if (!args.positional().empty()) throw msgs::cli::UsageError("unexpected argument '" + args.positional()[0] + "'");
   if (args.has("raw")) return run_raw(args);
-  if (args.has("captures") || args.has("width")) throw msgs::cli::UsageError("--captures and --width need --raw");
+  if (args.has("captures") || args.has("width") || args.has("light-variation"))
+    throw msgs::cli::UsageError("--captures, --width and --light-variation need --raw");
   msgs::synth::SynthOptions opt;
   opt.preset = args.get("preset", "tiny");
   try {

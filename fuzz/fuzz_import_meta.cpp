@@ -45,6 +45,14 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     io::FrameRadiometry r = io::frame_radiometry(m, plan.steps, 65535.0, 8, 6);
     io::check_radiometry(r, 8, 6, "fuzz.tif");
     (void)io::relative_radiance(1000.0, 3.0, 2.0, r);
+    // And the plan for reflectance, where nothing is missing.
+    const io::BandPlan refl = io::plan_band({m, m}, {"a.tif", "b.tif"}, true);
+    if (refl.missing.empty()) {
+      io::FrameRadiometry q = io::frame_radiometry(m, refl.steps, 65535.0, 8, 6);
+      q.scale = io::reflectance_scale(q);
+      io::check_radiometry(q, 8, 6, "fuzz.tif");
+      (void)io::relative_radiance(1000.0, 3.0, 2.0, q);
+    }
     // A position that was read is a finite place on the Earth, and pairs can be formed from it.
     if (m.gps) {
       const auto local = io::local_metres(*m.gps, 0.0, 0.0);

@@ -98,6 +98,21 @@ msgs::synth::SynthPreset raw_set_preset(const msgs::synth::RawOptions& opt) {
   return p;
 }
 
+/// The radiance the scene rendered into MicaSense file `src` (IMG_000N_B.tif) of a raw set of `opt`
+/// (scene from make_scene(raw_set_preset(opt), opt.seed)): the truth its normalised image is
+/// compared with.
+msgs::Image<float> micasense_truth(const msgs::synth::SynthScene& scene, const msgs::synth::RawOptions& opt,
+                                   const std::string& src) {
+  const auto bands = msgs::synth::raw_bands("micasense");
+  const int capture = std::stoi(src.substr(4, 4)) - 1;
+  const std::size_t bi = std::size_t(src[9] - '1');
+  const msgs::Camera<float> cam = scene.captures[std::size_t(capture)].cameras[std::size_t(bands[bi].mount)];
+  msgs::synth::RenderSettings rs;
+  rs.aa = raw_set_preset(opt).aa;
+  rs.jitter_seed = msgs::synth::frame_jitter_seed(opt.seed, capture, bands[bi].mount) ^ (bi * 0x9E3779B97F4A7C15ULL);
+  return msgs::synth::detail::render_radiance(scene, cam, bands[bi].spectrum_channel, rs);
+}
+
 /// The scratch folder of a test case that runs COLMAP, with the raw set of `opt` written into
 /// raw/; nullopt, with a message saying what goes untested, when colmap is not on PATH.
 std::optional<fs::path> colmap_case(const std::string& name, const std::string& untested,
@@ -373,9 +388,7 @@ TEST_CASE("msgs import: synthetic MicaSense captures through exiv2 + COLMAP") {
 
   // Exposure differences removed: against the ground-truth radiance of the same pixels, the
   // normalised values of a band have one ratio in every capture, the raw DNs do not.
-  const msgs::synth::SynthPreset preset = raw_set_preset(opt);
-  const msgs::synth::SynthScene scene = msgs::synth::make_scene(preset, opt.seed);
-  const auto bands = msgs::synth::raw_bands("micasense");
+  const msgs::synth::SynthScene scene = msgs::synth::make_scene(raw_set_preset(opt), opt.seed);
   std::map<std::string, std::vector<double>> norm_ratio, raw_ratio;
   for (const auto& f : tf["frames"]) {
     const auto& rad = f["radiometry"];
@@ -389,15 +402,9 @@ TEST_CASE("msgs import: synthetic MicaSense captures through exiv2 + COLMAP") {
     CHECK(rad["exposure_s"].get<double>() > 0);
     CHECK(rad["gain"].get<double>() >= 1);
     const std::string src = f["source"];  // IMG_000N_B.tif
-    const int capture = std::stoi(src.substr(4, 4)) - 1;
-    const std::size_t bi = std::size_t(src[9] - '1');
-    const auto e = msgs::synth::raw_exposure(opt.seed, capture, int(bi));
+    const auto e = msgs::synth::raw_exposure(opt.seed, std::stoi(src.substr(4, 4)) - 1, src[9] - '1');
     CHECK(rad["exposure_s"].get<double>() == doctest::Approx(e.exposure_s));
-    const msgs::Camera<float> cam = scene.captures[std::size_t(capture)].cameras[std::size_t(bands[bi].mount)];
-    msgs::synth::RenderSettings rs;
-    rs.aa = preset.aa;
-    rs.jitter_seed = msgs::synth::frame_jitter_seed(opt.seed, capture, bands[bi].mount) ^ (bi * 0x9E3779B97F4A7C15ULL);
-    const auto truth = msgs::synth::detail::render_radiance(scene, cam, bands[bi].spectrum_channel, rs);
+    const auto truth = micasense_truth(scene, opt, src);
     const auto norm = msgs::io::read_image(dir / "ds" / f["file_path"].get<std::string>());
     const auto raw = msgs::io::read_image(dir / "raw" / src);
     std::vector<double> rn, rr, rn_top, rn_bottom;
@@ -426,6 +433,65 @@ TEST_CASE("msgs import: synthetic MicaSense captures through exiv2 + COLMAP") {
     CHECK(*hi / *lo < 1.01);
     CHECK(*rhi / *rlo > 1.3);
   }
+}
+
+TEST_CASE("msgs import --radiometry reflectance: the DLS 2 takes out changing sunlight; other cameras are refused") {
+  // Sunlight that changes by up to 25% from capture to capture, which the light sensor records.
+  msgs::synth::RawOptions opt = small_micasense_set();
+  opt.light_variation = 0.25;
+  const auto dir_or = colmap_case("reflectance", "reflectance from the light sensor", opt);
+  if (!dir_or) return;
+  const fs::path& dir = *dir_or;
+  const auto log_run = import_ok(dir, "ds", "--radiometry reflectance");
+  const int rc = log_run.first;
+  const std::string& log = log_run.second;
+  REQUIRE_MESSAGE(rc == 0, log);
+  CHECK(!leftovers(dir, "ds"));
+  const Json tf = Json::parse(slurp(dir / "ds" / "transforms.json"));
+  const msgs::synth::SynthScene scene = msgs::synth::make_scene(raw_set_preset(opt), opt.seed);
+  REQUIRE(tf["frames"].size() == 20);
+  double e_lo = 1e9, e_hi = 0;
+  for (const auto& f : tf["frames"]) {
+    const auto& rad = f["radiometry"];
+    REQUIRE(rad["applied"] == true);
+    CHECK(rad["metadata_keys"]["irradiance"] == "Xmp.Camera.HorizontalIrradiance");
+    CHECK(rad["formula"].get<std::string>().rfind("reflectance", 0) == 0);
+    const double e = rad["irradiance_w_m2_nm"].get<double>();
+    e_lo = std::min(e_lo, e);
+    e_hi = std::max(e_hi, e);
+    // The scene's values are the reflectances: every image, whatever its exposure and light,
+    // gives them back (the pixels the 16 bits hold without clipping).
+    const std::string src = f["source"];
+    const auto truth = micasense_truth(scene, opt, src);
+    const auto norm = msgs::io::read_image(dir / "ds" / f["file_path"].get<std::string>());
+    const auto raw = msgs::io::read_image(dir / "raw" / src);
+    std::vector<double> ratio;
+    for (int y = 0; y < truth.height; ++y)
+      for (int x = 0; x < truth.width; ++x) {
+        const double t = truth.at(x, y, 0);
+        if (t < 0.02 || t > 0.95 || raw.at(x, y, 0) * 65535.0 > 65000) continue;
+        ratio.push_back(norm.at(x, y, 0) / t);
+      }
+    REQUIRE(ratio.size() > 1000);
+    CHECK_MESSAGE(median(ratio) == doctest::Approx(1.0).epsilon(0.01), src);
+  }
+  CHECK(e_hi / e_lo > 1.2);  // the light did change
+
+  // DJI files carry no irradiance msgs reads: refused before COLMAP, naming what is missing.
+  msgs::synth::RawOptions dji;
+  dji.camera = "dji";
+  dji.captures = 2;
+  dji.width = 48;
+  msgs::synth::write_synthetic_raw(dir / "raw_dji", dji);
+  const int rc_dji = run(std::string(MSGS_BIN) + " import --radiometry reflectance --images '" +
+                             (dir / "raw_dji").string() + "' --out '" + (dir / "dji").string() + "'",
+                         dir / "dji.log");
+  const std::string text = slurp(dir / "dji.log");
+  CHECK(rc_dji == 1);
+  CHECK_MESSAGE(text.find("--radiometry reflectance needs") != std::string::npos, text);
+  CHECK_MESSAGE(text.find("horizontal irradiance (MicaSense DLS 2) missing in 2 of 2 files") != std::string::npos, text);
+  CHECK(!fs::exists(dir / "dji"));
+  CHECK(!leftovers(dir, "dji"));
 }
 
 TEST_CASE("msgs import --matching window and gps: the pairs of nearby captures register the whole set") {

@@ -247,6 +247,71 @@ TEST_CASE("radiometry: MicaSense's row gradient, from RadiometricCalibration") {
                        doctest::Contains("x.tif: the row gradient"), IoError);
 }
 
+TEST_CASE("radiometry: reflectance from MicaSense's a1 and the DLS 2 irradiance") {
+  const std::string cal = "Xmp.MicaSense.RadiometricCalibration          0.000145914, 1.39479e-07, 1.17145e-05\n";
+  const std::string text = std::string(kMicaSense) + cal +
+                           "Xmp.Camera.HorizontalIrradiance               120.5\n"
+                           "Xmp.Camera.IrradianceScaleToSIUnits           0.01\n";
+  const CaptureMeta m = parse_capture_meta(text, "IMG_0001_2.tif");
+  REQUIRE(m.radiance_a1.has_value());
+  CHECK(*m.radiance_a1 == doctest::Approx(0.000145914));
+  REQUIRE(m.irradiance.has_value());
+  CHECK(*m.irradiance == doctest::Approx(1.205));
+  CHECK(m.source.at("irradiance") == "Xmp.Camera.HorizontalIrradiance");
+  // Without the scale key, MicaSense's library takes 0.01; the DLS namespace is read too.
+  const CaptureMeta dls = parse_capture_meta(std::string(kMicaSense) + "Xmp.DLS.HorizontalIrradiance 98\n", "a.tif");
+  CHECK(*dls.irradiance == doctest::Approx(0.98));
+  // No reading (0) is no irradiance, and no error; a negative one is an error naming the key.
+  CHECK(!parse_capture_meta("Xmp.Camera.HorizontalIrradiance 0\n", "a.tif").irradiance);
+  CHECK_THROWS_WITH_AS(parse_capture_meta("Xmp.Camera.HorizontalIrradiance -3\n", "a.tif"),
+                       doctest::Contains("a.tif: field 'Xmp.Camera.HorizontalIrradiance'"), IoError);
+  CHECK_THROWS_WITH_AS(parse_capture_meta("Xmp.Camera.HorizontalIrradiance 1\nXmp.Camera.IrradianceScaleToSIUnits 0\n", "a.tif"),
+                       doctest::Contains("IrradianceScaleToSIUnits"), IoError);
+  // Firmware that wrote HorizontalIrradiance wrongly (MicaSense's library recomputes it there).
+  const auto with = [&](const char* model, const char* software) {
+    return parse_capture_meta(text + "Exif.Image.Model " + model + "\nExif.Image.Software " + software + "\n", "a.tif");
+  };
+  CHECK(!with("RedEdge-M", "v5.1.6").irradiance);
+  CHECK(with("RedEdge-M", "v5.1.6").irradiance_problem.find("before v5.1.7") != std::string::npos);
+  CHECK(with("RedEdge-M", "v6.2.0").irradiance.has_value());
+  CHECK(!with("Altum", "v1.2.2").irradiance);
+  CHECK(with("Altum", "v1.10.0").irradiance.has_value());
+  CHECK(!with("RedEdge", "unknown").irradiance);
+  CHECK(with("RedEdge-P", "v1.0.0").irradiance.has_value());  // not affected
+
+  // The plan for reflectance needs every step, a1 and the irradiance in every image.
+  const BandPlan p = plan_band({m, m}, {"a.tif", "b.tif"}, true);
+  CHECK(p.missing.empty());
+  CHECK(p.steps.irradiance);
+  CHECK(!plan_band({m, m}, {"a.tif", "b.tif"}).steps.irradiance);  // relative radiance ignores it
+  CaptureMeta dark = m;
+  dark.irradiance.reset();
+  const BandPlan q = plan_band({m, dark}, {"a.tif", "b.tif"}, true);
+  CHECK(!q.steps.irradiance);
+  REQUIRE(q.missing.count("horizontal irradiance (MicaSense DLS 2)") == 1);
+  CHECK(q.missing.at("horizontal irradiance (MicaSense DLS 2)") == std::vector<std::filesystem::path>{"b.tif"});
+  const CaptureMeta plain = parse_capture_meta(kMicaSense, "c.tif");
+  const BandPlan none = plan_band({plain}, {"c.tif"}, true);
+  CHECK(none.missing.count("radiance calibration a1 (MicaSense RadiometricCalibration)") == 1);
+  CHECK(none.missing.count("row gradient (MicaSense RadiometricCalibration)") == 1);
+
+  // Known numbers: reflectance 0.1 under 1.205 W/m^2/nm is radiance 0.1 x 1.205 / pi; DN from
+  // MicaSense's model, radiance = a1 (DN - black) / 2^16 / (exposure gain fall-off row).
+  FrameRadiometry r = frame_radiometry(m, p.steps, 65535, 160, 120);
+  r.scale = reflectance_scale(r);
+  CHECK(r.scale == doctest::Approx(3.14159265358979 * 0.000145914 / 65536));
+  const double x = 30, y = 90, rho = 0.1;
+  const double radiance = rho * 1.205 / 3.14159265358979;
+  const double response = r.exposure_s * r.gain * vignetting_falloff(r, x, y) * row_gradient_factor(r, y);
+  const double dn = 4800 + radiance * 65536 / 0.000145914 * response;
+  CHECK(relative_radiance(dn, x, y, r) * r.scale == doctest::Approx(rho));
+  msgs::Image<float> img(160, 120, 1);
+  img.at(int(x), int(y), 0) = float(dn / 65535);
+  CHECK(normalise_image(img, r, "a.tif").at(int(x), int(y), 0) == doctest::Approx(rho).epsilon(1e-4));
+  r.irradiance = 0;
+  CHECK_THROWS_WITH_AS(normalise_image(img, r, "a.tif"), doctest::Contains("a.tif: irradiance 0"), IoError);
+}
+
 TEST_CASE("radiometry: a vignetting model that brightens the image's edge is an error") {
   // DJI's correction read as a fall-off would double the vignetting; so would the reverse.
   FrameRadiometry r;

@@ -25,8 +25,14 @@
 //                 sum_i c_i (x / width)^a_i (y / height)^b_i, the exponents a_0, b_0, a_1, b_1, ...
 //                 in the Name key; the image is divided by it)
 //   row gradient  Xmp.MicaSense.RadiometricCalibration (a1, a2, a3: MicaSense's sensor records row y
-//                 brighter by 1 + a2 y / exposure - a3 y; a1, an absolute scale, is left to the band
-//                 scale)
+//                 brighter by 1 + a2 y / exposure - a3 y; a1 turns the corrected DN / 2^bits into
+//                 radiance in W/m^2/sr/nm, used by --radiometry reflectance only)
+//   irradiance    Xmp.Camera.HorizontalIrradiance or Xmp.DLS.HorizontalIrradiance (MicaSense DLS 2:
+//                 the sunlight on a level surface, W/m^2/nm after x Xmp.Camera.IrradianceScaleToSIUnits,
+//                 0.01 where that key is missing, as MicaSense's library assumes). Left out, with the
+//                 reason in `irradiance_problem`, for a RedEdge / RedEdge-M before firmware 5.1.7 and
+//                 an Altum before 1.2.3 (Exif.Image.Model, Exif.Image.Software), whose firmware
+//                 wrote it wrongly
 //   focal length  Exif.Photo.FocalLength, Xmp.exif.FocalLength (mm)
 //   focal plane   Exif.Photo.FocalPlaneXResolution / YResolution / ResolutionUnit and the same in
 //                 Xmp.exif (unit 2 inch, the EXIF default, 3 cm, 4 mm, 5 micrometre)
@@ -37,6 +43,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cctype>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -72,6 +79,13 @@ struct CaptureMeta {
   std::vector<std::array<int, 2>> vignetting_exp2d;     ///< (a_i, b_i)
   /// MicaSense's a2, a3: DN grows along the row index y by 1 + a2 y / exposure_s - a3 y.
   std::optional<std::array<double, 2>> row_gradient;
+  /// MicaSense's a1: radiance (W/m^2/sr/nm) = a1 x (DN - black level) / 2^bits / (exposure x gain
+  /// x fall-off x row gradient).
+  std::optional<double> radiance_a1;
+  /// The light sensor's spectral irradiance on a level surface at the capture (W/m^2/nm).
+  std::optional<double> irradiance;
+  /// Why an irradiance the file holds was not taken (a firmware known to write it wrongly).
+  std::string irradiance_problem;
   std::optional<double> focal_length_mm;
   std::optional<double> focal_plane_px_per_mm;  ///< x resolution, converted to pixels per mm
   std::optional<int> bits_per_sample;
@@ -107,7 +121,8 @@ inline const std::vector<std::string>& exiv2_metadata_keys() {
       "Xmp.drone-dji.AbsoluteAltitude", "Xmp.exif.GPSLatitude", "Xmp.exif.GPSLongitude", "Xmp.exif.GPSAltitude",
       "Xmp.exif.GPSAltitudeRef", "Xmp.Camera.BlackCurrent", "Xmp.drone-dji.ExposureTime", "Exif.Image.Make",
       "Xmp.Camera.VignettingPolynomial2D", "Xmp.Camera.VignettingPolynomial2DName",
-      "Xmp.MicaSense.RadiometricCalibration"};
+      "Xmp.MicaSense.RadiometricCalibration", "Xmp.Camera.HorizontalIrradiance", "Xmp.DLS.HorizontalIrradiance",
+      "Xmp.Camera.IrradianceScaleToSIUnits", "Exif.Image.Model", "Exif.Image.Software"};
   return keys;
 }
 
@@ -203,6 +218,23 @@ inline std::optional<double> parse_xmp_coordinate(std::string_view s, char posit
     deg += (*v)[2] / 3600.0;
   }
   return ref == negative ? -deg : deg;
+}
+
+/// The leading numbers of a firmware version ("v5.1.7", "v2.1.2-34-g05e37eb" -> {5, 1, 7},
+/// {2, 1, 2}); empty when it does not start with one.
+inline std::vector<int> firmware_version(std::string_view s) {
+  s = trim(s);
+  if (!s.empty() && (s[0] == 'v' || s[0] == 'V')) s.remove_prefix(1);
+  std::vector<int> out;
+  std::size_t i = 0;
+  while (i < s.size() && out.size() < 4 && std::isdigit(static_cast<unsigned char>(s[i]))) {
+    long v = 0;
+    while (i < s.size() && std::isdigit(static_cast<unsigned char>(s[i])) && v < 100000) v = v * 10 + (s[i++] - '0');
+    out.push_back(int(v));
+    if (i < s.size() && s[i] == '.') ++i;
+    else break;
+  }
+  return out;
 }
 
 }  // namespace detail
@@ -431,6 +463,33 @@ inline CaptureMeta capture_meta_from_exiv2(const std::map<std::string, std::stri
     if (!list || list->size() != 3) bad(*e, "three numbers (a1, a2, a3)");
     m.row_gradient = std::array<double, 2>{(*list)[1], (*list)[2]};
     m.source["row_gradient"] = e->first;
+    if ((*list)[0] > 0) {
+      m.radiance_a1 = (*list)[0];
+      m.source["radiance_a1"] = e->first;
+    }
+  }
+  if (auto e = first({"Xmp.Camera.HorizontalIrradiance", "Xmp.DLS.HorizontalIrradiance"})) {
+    // A zero is what a capture without a light-sensor reading carries: no irradiance, no error.
+    const double h = number(*e, "an irradiance (>= 0)", false);
+    if (h < 0) bad(*e, "an irradiance (>= 0)");
+    double scale = 0.01;
+    if (auto sc = first({"Xmp.Camera.IrradianceScaleToSIUnits"})) scale = number(*sc, "a scale factor (> 0)", true);
+    // MicaSense's library distrusts HorizontalIrradiance from these firmware versions.
+    const auto model = first({"Exif.Image.Model"});
+    const std::string_view name = model ? detail::trim(model->second) : std::string_view();
+    const std::vector<int> fixed = name == "RedEdge" || name == "RedEdge-M" ? std::vector<int>{5, 1, 7}
+                                   : name == "Altum"                          ? std::vector<int>{1, 2, 3}
+                                                                              : std::vector<int>{};
+    const auto software = first({"Exif.Image.Software"});
+    const std::vector<int> version = software ? detail::firmware_version(software->second) : std::vector<int>{};
+    if (!fixed.empty() && (version.empty() || version < fixed)) {
+      m.irradiance_problem = cat("a ", name, " with firmware '", software ? software->second.substr(0, 40) : std::string("?"),
+                                 "' (before v", fixed[0], ".", fixed[1], ".", fixed[2],
+                                 ") wrote HorizontalIrradiance wrongly");
+    } else if (h > 0) {
+      m.irradiance = h * scale;
+      m.source["irradiance"] = e->first;
+    }
   }
   if (auto e = first({"Exif.Photo.FocalLength", "Xmp.exif.FocalLength"})) {
     m.focal_length_mm = number(*e, "a focal length in mm (> 0)", true);

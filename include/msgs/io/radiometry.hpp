@@ -11,6 +11,14 @@
 // capture set, chosen so that the brightest normalised value of the band is 1. Steps whose tags
 // are missing for some image of a band are left out for the whole band (mixing corrected and
 // uncorrected images would break the common scale); plan_band says which and why.
+//
+// Reflectance (`msgs import --radiometry reflectance`), as MicaSense's library and OpenDroneMap
+// compute it from the camera's light sensor:
+//
+//   R(x, y) = pi * a1 * (DN - black_level) / 2^bits / (exposure_s * gain * falloff * row(y) * E)
+//
+// with a1 MicaSense's radiometric calibration (radiance in W/m^2/sr/nm) and E the horizontal
+// irradiance (W/m^2/nm) that the DLS 2 recorded with the capture. Every step is then required.
 #pragma once
 
 #include <algorithm>
@@ -30,7 +38,8 @@ namespace msgs::io {
 /// Which corrections are applied to a band.
 struct RadiometrySteps {
   bool black_level = false, exposure = false, gain = false, vignetting = false, row_gradient = false;
-  bool any() const { return black_level || exposure || gain || vignetting || row_gradient; }
+  bool irradiance = false;  ///< reflectance: divide by the light sensor's irradiance
+  bool any() const { return black_level || exposure || gain || vignetting || row_gradient || irradiance; }
 };
 
 /// The normalisation of one image.
@@ -45,7 +54,9 @@ struct FrameRadiometry {
   std::vector<std::array<int, 2>> vignetting_exp2d;  ///< their exponents of x / width and y / height
   int width = 0, height = 0;  ///< the image's size, which the 2-D model's coordinates are divided by
   double row_a2 = 0.0, row_a3 = 0.0;  ///< MicaSense's row gradient (used when steps.row_gradient)
-  double scale = 1.0;  ///< common factor of the band
+  double irradiance = 1.0;            ///< W/m^2/nm (used when steps.irradiance)
+  double radiance_a1 = 0.0;           ///< MicaSense's a1 (reflectance only)
+  double scale = 1.0;  ///< common factor of the band; for reflectance pi a1 / 2^bits
 };
 
 /// What plan_band decided for a band, with the reasons.
@@ -56,8 +67,11 @@ struct BandPlan {
 };
 
 /// Decide which steps a band gets: a step is applied when every image of the band has its tags
-/// (black level; exposure time; gain or ISO; vignetting polynomial and centre).
-inline BandPlan plan_band(const std::vector<CaptureMeta>& metas, const std::vector<std::filesystem::path>& files) {
+/// (black level; exposure time; gain or ISO; vignetting polynomial and centre). For reflectance
+/// every step, MicaSense's a1 and the irradiance are needed too: `missing` then lists what the
+/// caller must refuse.
+inline BandPlan plan_band(const std::vector<CaptureMeta>& metas, const std::vector<std::filesystem::path>& files,
+                          bool reflectance = false) {
   BandPlan plan;
   auto check = [&](const char* tag, auto&& has) {
     std::vector<std::filesystem::path> lacking;
@@ -72,10 +86,16 @@ inline BandPlan plan_band(const std::vector<CaptureMeta>& metas, const std::vect
   plan.steps.vignetting = check("vignetting polynomial+centre", [](const CaptureMeta& m) { return m.has_vignetting(); });
   // MicaSense's row gradient needs the exposure time. Only MicaSense writes it, so a band none of
   // whose images has it is not missing anything.
-  if (std::any_of(metas.begin(), metas.end(), [](const CaptureMeta& m) { return m.row_gradient.has_value(); }))
+  if (reflectance || std::any_of(metas.begin(), metas.end(), [](const CaptureMeta& m) { return m.row_gradient.has_value(); }))
     plan.steps.row_gradient =
         check("row gradient (MicaSense RadiometricCalibration)", [](const CaptureMeta& m) { return m.row_gradient.has_value(); }) &&
         plan.steps.exposure;
+  if (reflectance) {
+    check("radiance calibration a1 (MicaSense RadiometricCalibration)",
+          [](const CaptureMeta& m) { return m.radiance_a1.has_value(); });
+    plan.steps.irradiance =
+        check("horizontal irradiance (MicaSense DLS 2)", [](const CaptureMeta& m) { return m.irradiance.has_value(); });
+  }
   return plan;
 }
 
@@ -104,7 +124,15 @@ inline FrameRadiometry frame_radiometry(const CaptureMeta& m, const RadiometrySt
     r.row_a2 = (*m.row_gradient)[0];
     r.row_a3 = (*m.row_gradient)[1];
   }
+  if (steps.irradiance) r.irradiance = *m.irradiance;
+  if (m.radiance_a1) r.radiance_a1 = *m.radiance_a1;
   return r;
+}
+
+/// The factor that turns (DN - black level) / sensor_response into reflectance: pi a1 / 2^bits,
+/// with 2^bits = dn_max + 1 (65536 for 16-bit files, as MicaSense's library divides).
+inline double reflectance_scale(const FrameRadiometry& r) {
+  return 3.14159265358979323846 * r.radiance_a1 / (r.dn_max + 1.0);
 }
 
 /// 1 + k0 r + k1 r^2 + ... (Horner).
@@ -146,10 +174,12 @@ inline double row_gradient_factor(const FrameRadiometry& r, double y) {
   return r.steps.row_gradient ? 1.0 + r.row_a2 * y / r.exposure_s - r.row_a3 * y : 1.0;
 }
 
-/// What the sensor records at pixel (x, y) per unit of relative radiance, above the black level:
-/// exposure x gain x vignetting fall-off x row gradient.
+/// What the sensor records at pixel (x, y) per unit of relative radiance (of reflectance, with the
+/// irradiance step), above the black level: exposure x gain x vignetting fall-off x row gradient
+/// (x irradiance).
 inline double sensor_response(const FrameRadiometry& r, double x, double y) {
-  return r.exposure_s * r.gain * vignetting_falloff(r, x, y) * row_gradient_factor(r, y);
+  const double s = r.exposure_s * r.gain * vignetting_falloff(r, x, y) * row_gradient_factor(r, y);
+  return r.steps.irradiance ? s * r.irradiance : s;
 }
 
 /// Relative radiance of digital number `dn` at pixel (x, y), before the band scale.
@@ -181,6 +211,8 @@ inline void check_radiometry(const FrameRadiometry& r, int width, int height, co
       !std::isfinite(r.exposure_s * r.gain) || !(r.scale > 0) || !std::isfinite(r.scale))
     fail(file, cat("radiometric parameters out of range (black level ", r.black_level, ", exposure ", r.exposure_s,
                    " s, gain ", r.gain, ", scale ", r.scale, ")"));
+  if (r.steps.irradiance && (!(r.irradiance > 0) || !std::isfinite(r.irradiance * r.exposure_s * r.gain)))
+    fail(file, cat("irradiance ", r.irradiance, " W/m^2/nm out of range (expected > 0; skip the metadata with --radiometry auto)"));
   // The row gradient is linear in y: positive at the first and last row means positive on all.
   for (const double y : {0.0, double(height - 1)}) {
     const double g = row_gradient_factor(r, y);

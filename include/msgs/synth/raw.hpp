@@ -3,7 +3,7 @@
 // writes them (offline test data for `msgs import`): the camera's file names, 16-bit TIFFs whose
 // digital numbers carry per-capture exposure differences, vignetting and a black level,
 //
-//   DN = black_level + radiance * exposure_s * gain * falloff(r) * sensitivity, clamped to 0..65535,
+//   DN = black_level + radiance * exposure_s * gain * falloff(r) * sensitivity * light, clamped to 0..65535,
 //
 // and the metadata that real camera writes, as an XMP packet in TIFF tag 700 (readable by exiv2).
 //
@@ -12,7 +12,10 @@
 //              Camera:VignettingCenter, Camera:VignettingPolynomial (fall-off 1 + k0 r + ... in
 //              pixels), Camera:BlackLevel, MicaSense:RadiometricCalibration (a1, a2, a3: the sensor
 //              records row y brighter by 1 + a2 y / exposure - a3 y; a real RedEdge's values,
-//              scaled to the image height), exif:ExposureTime, exif:ISOSpeedRatings, exif:FocalLength,
+//              scaled to the image height; a1 such that pi x radiance / irradiance gives back the
+//              scene's values), Camera:HorizontalIrradiance + Camera:IrradianceScaleToSIUnits (a
+//              DLS 2's reading of the capture's sunlight, see RawOptions::light_variation),
+//              exif:ExposureTime, exif:ISOSpeedRatings, exif:FocalLength,
 //              exif:FocalPlaneXResolution/YResolution/ResolutionUnit (4 = mm). Real MicaSense files
 //              keep exposure, ISO, focal length and black level in EXIF IFDs instead; the importer
 //              reads both places.
@@ -68,6 +71,9 @@ struct RawOptions {
   std::uint64_t seed = 1;
   int captures = 0;   ///< number of captures (0: the preset's)
   int width = 0;      ///< multispectral image width (0: the preset's); height 3/4 of it, RGB 1.5x
+  /// The sunlight of each capture is 1 +- this (uniform, the same for every band of a capture),
+  /// as under passing clouds; 0 keeps it steady. The MicaSense light sensor records it.
+  double light_variation = 0.0;
   bool overwrite = false;
 };
 
@@ -146,6 +152,17 @@ inline RawExposure raw_exposure(std::uint64_t seed, int capture, int band) {
   e.iso = u < 0.55 ? 100 : u < 0.9 ? 200 : 400;
   e.exposure_s = std::round(1.0 / e.exposure_s) > 0 ? 1.0 / std::round(1.0 / e.exposure_s) : e.exposure_s;  // 1/N s
   return e;
+}
+
+/// Sunlight on a level surface at wavelength `nm` under the steady sky of the raw sets (W/m^2/nm,
+/// roughly the solar spectrum at the ground from green to near infra-red).
+inline double raw_irradiance(double nm) { return 1.45 - 0.0006 * (nm - 475.0); }
+
+/// The sunlight of capture `capture` relative to the steady sky: 1 + variation x U(-1, 1).
+inline double raw_light(std::uint64_t seed, int capture, double variation) {
+  if (variation == 0.0) return 1.0;
+  Rng rng(hash_tuple(seed, 0x5A71C7ULL, capture));
+  return 1.0 + variation * (2.0 * rng.uniform() - 1.0);
 }
 
 namespace detail {
@@ -279,6 +296,8 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
   SynthPreset preset = synth_preset(opt.preset);
   if (opt.captures < 0 || opt.captures > 100000) throw std::invalid_argument("captures must be 0 (preset) .. 100000");
   if (opt.width != 0 && (opt.width < 16 || opt.width > 8192)) throw std::invalid_argument("width must be 0 (preset) or 16 .. 8192");
+  if (!(opt.light_variation >= 0.0 && opt.light_variation <= 0.9))
+    throw std::invalid_argument("light_variation must be 0 .. 0.9");
   if (opt.captures > 0) preset.captures = opt.captures;
   if (opt.width > 0) {
     preset.ms_width = opt.width;
@@ -347,6 +366,7 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
         continue;
       }
       const RawExposure e = raw_exposure(opt.seed, ci, int(bi));
+      const double light = raw_light(opt.seed, ci, opt.light_variation);
       sum.min_exposure_s = std::min(sum.min_exposure_s, e.exposure_s);
       sum.max_exposure_s = std::max(sum.max_exposure_s, e.exposure_s);
       sum.min_iso = std::min(sum.min_iso, e.iso);
@@ -374,7 +394,7 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
             fall = opt.camera == "dji" ? 1.0 / (1.0 + p) : 1.0 + p;
           }
           const double row = micasense ? 1.0 + row_a2 * y / e.exposure_s - row_a3 * y : 1.0;
-          const double v = bl + double(L.at(x, y, 0)) * e.exposure_s * e.gain() * fall * row * b.sensitivity;
+          const double v = bl + double(L.at(x, y, 0)) * e.exposure_s * e.gain() * fall * row * b.sensitivity * light;
           dn[std::size_t(y) * std::size_t(cam.width) + std::size_t(x)] =
               static_cast<std::uint16_t>(std::lround(std::clamp(v, 0.0, 65535.0)));
         }
@@ -396,7 +416,15 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
       } else {
         elems.emplace_back("exif:ISOSpeedRatings", detail::rdf_seq({double(e.iso)}));
         if (black) attrs.emplace_back("Camera:BlackLevel", detail::g10(black_level));
-        if (micasense) elems.emplace_back("MicaSense:RadiometricCalibration", detail::rdf_seq({1.45914e-04, row_a2, row_a3}));
+        if (micasense) {
+          // The scene's values are reflectances under the band's sunlight E_ref: a1 makes
+          // pi a1 (DN - black) / 2^16 / (exposure gain fall-off row E) give them back.
+          const double e_ref = raw_irradiance(b.wavelength_nm);
+          const double a1 = 65536.0 * e_ref / (3.14159265358979323846 * b.sensitivity);
+          elems.emplace_back("MicaSense:RadiometricCalibration", detail::rdf_seq({a1, row_a2, row_a3}));
+          attrs.emplace_back("Camera:HorizontalIrradiance", detail::g10(e_ref * light / 0.01));
+          attrs.emplace_back("Camera:IrradianceScaleToSIUnits", "0.01");
+        }
       }
       if (sequoia) {
         std::vector<double> exps;
