@@ -749,17 +749,18 @@ int run_import(const std::vector<std::string>& argv) {
           for (const auto& f : lacking) names.push_back(f.generic_string());
           what += cat("\n    ", tag, " missing in ", lacking.size(), " of ", idx.size(), " files: ", list_some(names, 3));
         }
-        // Why a light-sensor reading was not taken (a firmware known to write it wrongly).
-        for (std::size_t i : idx)
-          if (!items[i].meta.irradiance_problem.empty()) {
-            what += cat("\n    (", items[i].source.generic_string(), ": ", items[i].meta.irradiance_problem, ")");
-            break;
-          }
-        if (reflectance)
+        if (reflectance) {
+          // Why a light-sensor reading was not taken (a firmware known to write it wrongly).
+          for (std::size_t i : idx)
+            if (!items[i].meta.irradiance_problem.empty()) {
+              what += cat("\n    (", items[i].source.generic_string(), ": ", items[i].meta.irradiance_problem, ")");
+              break;
+            }
           fail(images / srcs[0], cat("--radiometry reflectance needs every step, MicaSense's radiance calibration and",
                                      " the DLS 2 irradiance in every image of band ", band, ":", what,
                                      "\n  msgs computes reflectance from MicaSense's light sensor only; use",
                                      " --radiometry auto for relative radiance"));
+        }
         std::printf("  warning: %s: corrections left out for the whole band (%s):%s\n", band.c_str(),
                     steps.any() ? "the others are applied" : "stored values kept", what.c_str());
       }
