@@ -810,12 +810,24 @@ int run_import(const std::vector<std::string>& argv) {
     msgs::io::write_png16(layout / "images" / it.out_name, norm);
     msgs::io::write_png8(work / "images" / it.colmap_name, sift_copy(norm));
   }
-  if (reflectance)  // (relative radiance peaks at 1 by construction)
-    for (const auto& [band, c] : clipped)
+  if (reflectance) {
+    // How much the light changed over the flight, per band: what the irradiance step took out.
+    for (const auto& [band, idx] : by_band) {
+      if (band == "D") continue;
+      double lo = 1e300, hi = 0;
+      for (std::size_t i : idx) {
+        lo = std::min(lo, items[i].rad.irradiance);
+        hi = std::max(hi, items[i].rad.irradiance);
+      }
+      std::printf("  %s: reflectance under %.4g to %.4g W/m^2/nm of sunlight (the light sensor's readings)\n", band.c_str(),
+                  lo, hi);
+    }
+    for (const auto& [band, c] : clipped)  // (relative radiance peaks at 1 by construction)
       if (c[0] > 0)
         std::printf("  warning: %s: %.3g%% of the pixels have a reflectance above 1, clipped to 1 (specular highlights,"
                     " or an irradiance that does not fit the light the camera saw)\n",
                     band.c_str(), 100.0 * double(c[0]) / double(c[1]));
+  }
   std::printf("  radiometry and copies: %zu images in %.1f s\n", items.size(), since(t_meta));
   std::fflush(stdout);
 

@@ -447,6 +447,7 @@ TEST_CASE("msgs import --radiometry reflectance: the DLS 2 takes out changing su
   const std::string& log = log_run.second;
   REQUIRE_MESSAGE(rc == 0, log);
   CHECK(!leftovers(dir, "ds"));
+  CHECK_MESSAGE(log.find("MS_NIR: reflectance under ") != std::string::npos, log);
   const Json tf = Json::parse(slurp(dir / "ds" / "transforms.json"));
   const msgs::synth::SynthScene scene = msgs::synth::make_scene(raw_set_preset(opt), opt.seed);
   REQUIRE(tf["frames"].size() == 20);
