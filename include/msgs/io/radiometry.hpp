@@ -212,7 +212,8 @@ inline void check_radiometry(const FrameRadiometry& r, int width, int height, co
     fail(file, cat("radiometric parameters out of range (black level ", r.black_level, ", exposure ", r.exposure_s,
                    " s, gain ", r.gain, ", scale ", r.scale, ")"));
   if (r.steps.irradiance && (!(r.irradiance > 0) || !std::isfinite(r.irradiance * r.exposure_s * r.gain)))
-    fail(file, cat("irradiance ", r.irradiance, " W/m^2/nm out of range (expected > 0; skip the metadata with --radiometry auto)"));
+    fail(file, cat("irradiance ", r.irradiance, " W/m^2/nm out of range (expected > 0;",
+                   " --radiometry auto gives relative radiance without it)"));
   // The row gradient is linear in y: positive at the first and last row means positive on all.
   for (const double y : {0.0, double(height - 1)}) {
     const double g = row_gradient_factor(r, y);
