@@ -48,9 +48,7 @@ int run_raw(const msgs::cli::Args& args) {
   opt.seed = static_cast<std::uint64_t>(seed);
   opt.captures = static_cast<int>(std::clamp(captures, -1L, 1000000L));
   opt.width = static_cast<int>(std::clamp(width, -1L, 1000000L));
-  opt.light_variation = args.number("light-variation", 0.0);
-  if (!(opt.light_variation >= 0.0 && opt.light_variation <= 0.9))
-    throw msgs::cli::UsageError("option --light-variation expects a number from 0 to 0.9");
+  opt.light_variation = args.number("light-variation", 0.0);  // range checked by write_synthetic_raw
   opt.overwrite = args.flag("force");
   const std::string out = args.require("out");
   msgs::synth::RawSummary s;

@@ -26,6 +26,7 @@
 #include <cmath>
 #include <filesystem>
 #include <map>
+#include <numbers>
 #include <string>
 #include <vector>
 
@@ -132,7 +133,7 @@ inline FrameRadiometry frame_radiometry(const CaptureMeta& m, const RadiometrySt
 /// The factor that turns (DN - black level) / sensor_response into reflectance: pi a1 / 2^bits,
 /// with 2^bits = dn_max + 1 (65536 for 16-bit files, as MicaSense's library divides).
 inline double reflectance_scale(const FrameRadiometry& r) {
-  return 3.14159265358979323846 * r.radiance_a1 / (r.dn_max + 1.0);
+  return std::numbers::pi * r.radiance_a1 / (r.dn_max + 1.0);
 }
 
 /// 1 + k0 r + k1 r^2 + ... (Horner).

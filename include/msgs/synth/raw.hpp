@@ -48,6 +48,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
+#include <numbers>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -297,7 +298,7 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
   if (opt.captures < 0 || opt.captures > 100000) throw std::invalid_argument("captures must be 0 (preset) .. 100000");
   if (opt.width != 0 && (opt.width < 16 || opt.width > 8192)) throw std::invalid_argument("width must be 0 (preset) or 16 .. 8192");
   if (!(opt.light_variation >= 0.0 && opt.light_variation <= 0.9))
-    throw std::invalid_argument("light_variation must be 0 .. 0.9");
+    throw std::invalid_argument("the light variation must be 0 .. 0.9");
   if (opt.captures > 0) preset.captures = opt.captures;
   if (opt.width > 0) {
     preset.ms_width = opt.width;
@@ -420,7 +421,7 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
           // The scene's values are reflectances under the band's sunlight E_ref: a1 makes
           // pi a1 (DN - black) / 2^16 / (exposure gain fall-off row E) give them back.
           const double e_ref = raw_irradiance(b.wavelength_nm);
-          const double a1 = 65536.0 * e_ref / (3.14159265358979323846 * b.sensitivity);
+          const double a1 = 65536.0 * e_ref / (std::numbers::pi * b.sensitivity);
           elems.emplace_back("MicaSense:RadiometricCalibration", detail::rdf_seq({a1, row_a2, row_a3}));
           attrs.emplace_back("Camera:HorizontalIrradiance", detail::g10(e_ref * light / 0.01));
           attrs.emplace_back("Camera:IrradianceScaleToSIUnits", "0.01");
