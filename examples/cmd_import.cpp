@@ -23,6 +23,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <msgs/io/calibration_panel.hpp>
 #include <msgs/io/capture_meta.hpp>
 #include <msgs/io/capture_names.hpp>
 #include <msgs/io/colmap.hpp>
@@ -48,7 +49,8 @@ using msgs::io::fail;
 constexpr const char* kUsage =
     "usage: msgs import --images DIR --out DIR [--camera auto|micasense|dji|sequoia]\n"
     "                   [--bands PATTERN=ID,...] [--eval-every N] [--camera-model M]\n"
-    "                   [--radiometry auto|none|reflectance] [--matching exhaustive|window|gps]\n"
+    "                   [--radiometry auto|none|reflectance|panel|panel+dls] [--panel-albedo A]\n"
+    "                   [--matching exhaustive|window|gps]\n"
     "                   [--window N] [--neighbours K] [--sift-threshold T] [--ba-tolerance X]\n"
     "                   [--merge-models on|off] [--rig on|off] [--allow-partial] [--force]\n"
     "                   [--colmap BIN] [--exiv2 BIN] [--keep-work]\n"
@@ -71,7 +73,10 @@ constexpr const char* kUsage =
     "     msgs/io/capture_meta.hpp). These values are relative radiance, not reflectance: indices\n"
     "     such as NDVI computed from them are shifted from reflectance-based ones. With\n"
     "     --radiometry reflectance, MicaSense files give reflectance instead: pi x radiance (a1\n"
-    "     of RadiometricCalibration) / the horizontal irradiance of the DLS 2 light sensor.\n"
+    "     of RadiometricCalibration) / the horizontal irradiance of the DLS 2 light sensor; with\n"
+    "     panel or panel+dls, reflectance from the calibration-panel captures the camera marked.\n"
+    "     Captures marked as pictures of a calibration panel (Camera:CalibrationPicture) are set\n"
+    "     aside in every mode: they are not part of the scene.\n"
     "  3. Poses with COLMAP on the CPU (feature_extractor with one camera per band and the focal\n"
     "     length from the metadata as prior; matching of every pair, of nearby captures by GPS or\n"
     "     of a window of captures; mapper) on contrast-stretched 8-bit copies; the largest model\n"
@@ -102,7 +107,15 @@ constexpr const char* kUsage =
     "                      focal lengths in the metadata are still COLMAP's priors) or reflectance\n"
     "                      (pi x radiance / irradiance from MicaSense's a1 and its DLS 2 light\n"
     "                      sensor, no band scale: every band image must carry them, else an error;\n"
-    "                      values above 1 are clipped, with a warning)\n"
+    "                      values above 1 are clipped, with a warning), panel (reflectance from\n"
+    "                      the captures of a calibration panel the camera marked and read:\n"
+    "                      CalibrationPicture 2 with the panel's Albedo and ReflectArea; one\n"
+    "                      irradiance per band, the mean over the panel's area of the corrected\n"
+    "                      DN / albedo) or panel+dls (the DLS 2 follows the light through the\n"
+    "                      flight, the panel sets its level)\n"
+    "  --panel-albedo A    the panel's reflectance, for every band (0.49) or per band\n"
+    "                      (MS_G=0.49,MS_R=0.5,...): where Camera:Albedo is missing, or to\n"
+    "                      override it with the panel's calibration sheet\n"
     "  --matching M        image pairs COLMAP matches: exhaustive (default: every pair; the time\n"
     "                      grows with the square of the image count), window (the bands of a\n"
     "                      capture with each other, and each band with the same band of the next\n"
@@ -147,6 +160,79 @@ struct Item {
   int width = 0, height = 0;
 };
 
+/// The images of `scan`'s captures in msgs' band order, with their names in the layout and in
+/// COLMAP's folder (numbered by capture).
+std::vector<Item> scan_items(const msgs::io::CaptureScan& scan) {
+  std::vector<Item> items;
+  for (std::size_t ci = 0; ci < scan.captures.size(); ++ci)
+    for (const auto& b : msgs::io::standard_bands()) {
+      const auto it = scan.captures[ci].bands.find(b.id);
+      if (it == scan.captures[ci].bands.end()) continue;
+      Item item;
+      item.capture = ci;
+      item.band = b.id;
+      item.source = it->second;
+      char num[32];
+      std::snprintf(num, sizeof num, "_%05zu", ci + 1);
+      const bool rgb = b.channels == 3;
+      std::string ext = rgb ? it->second.extension().string() : ".png";
+      for (char& ch : ext) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+      item.out_name = cat(b.id, num, ext);
+      item.colmap_name = cat(b.id, "/", b.id, num, ".png");
+      items.push_back(std::move(item));
+    }
+  return items;
+}
+
+/// --panel-albedo: one reflectance for every band ("0.49", key "") or one per band
+/// ("MS_G=0.49,MS_R=0.5,..."), each in (0, 1].
+std::map<std::string, double> parse_panel_albedo(const std::string& text) {
+  std::map<std::string, double> out;
+  if (text.empty()) return out;
+  const auto value = [&](const std::string& v) {
+    const auto x = msgs::io::detail::parse_number(v);
+    if (!x || !(*x > 0 && *x <= 1))
+      throw msgs::cli::UsageError("--panel-albedo expects reflectances in (0, 1], as 0.49 or MS_G=0.49,MS_R=0.5,...; got '" +
+                                  v + "'");
+    return *x;
+  };
+  if (text.find('=') == std::string::npos) {
+    out[""] = value(text);
+    return out;
+  }
+  std::size_t i = 0;
+  while (i <= text.size()) {
+    const std::size_t j = std::min(text.find(',', i), text.size());
+    const std::string part = text.substr(i, j - i);
+    const std::size_t eq = part.find('=');
+    const std::string band = eq == std::string::npos ? part : part.substr(0, eq);
+    if (eq == std::string::npos || band == "D" || !msgs::io::find_band(band))
+      throw msgs::cli::UsageError(
+          "--panel-albedo expects BAND=REFLECTANCE pairs with BAND one of MS_G, MS_R, MS_RE, MS_NIR; got '" + part + "'");
+    out[band] = value(part.substr(eq + 1));
+    i = j + 1;
+  }
+  return out;
+}
+
+/// The normalisation of an image `r` in words, for transforms.json.
+std::string radiometry_formula(const msgs::io::FrameRadiometry& r, bool applied, msgs::io::Calibration calibration) {
+  if (!applied) return "value = DN / dn_max (stored values kept: no radiometric metadata)";
+  const auto& s = r.steps;
+  const std::string response =
+      cat(s.exposure ? " * exposure_s" : "", s.gain ? " * gain" : "", s.vignetting ? " * vignetting(r)" : "",
+          s.row_gradient ? " * (1 + a2 y / exposure_s - a3 y)" : "", s.irradiance ? " * light_sensor" : "");
+  const std::string v = cat("(DN", s.black_level ? " - black_level" : "", ")",
+                            response.empty() ? "" : " / (" + response.substr(3) + ")", " * scale");
+  switch (calibration) {
+    case msgs::io::Calibration::relative: return "value = " + v;
+    case msgs::io::Calibration::sun_sensor: return "reflectance = " + v + ", scale = pi * a1 / (dn_max + 1)";
+    default:
+      return "reflectance = " + v + ", scale = 1 / the mean over the band's calibration-panel pictures of the same" +
+             " without scale, averaged over the panel's area and divided by its albedo";
+  }
+}
+
 /// Bits per sample of a TIFF (0 when it is not a readable TIFF).
 int tiff_bits(const fs::path& p) {
   msgs::io::detail::TiffFile tf(p, "r");
@@ -161,6 +247,109 @@ std::string list_some(const std::vector<std::string>& v, std::size_t n = 6) {
   for (std::size_t i = 0; i < v.size() && i < n; ++i) s += cat(i ? ", " : "", v[i]);
   if (v.size() > n) s += cat(", ... (", v.size(), " in all)");
   return s;
+}
+
+/// A multispectral band image as stored (values in [0, 1]) and the digital number of a stored 1.
+struct BandImage {
+  msgs::Image<float> raw;
+  double dn_max = 65535.0;
+};
+
+/// Read an image of multispectral band `band`: single channel, 8 or 16 bits (IoError otherwise).
+BandImage read_band_image(const fs::path& src, const std::string& band) {
+  const int bits = tiff_bits(src);
+  if (bits != 8 && bits != 16 && bits != 0)
+    fail(src, cat("unsupported ", bits, "-bit samples for a multispectral band (need 8 or 16)"));
+  BandImage b{msgs::io::read_image(src), bits == 16 ? 65535.0 : 255.0};
+  if (b.raw.channels != 1) fail(src, cat("band ", band, " needs a single-channel image, this one has ", b.raw.channels));
+  return b;
+}
+
+/// The panel pictures (indices into `panels`) that can calibrate `band`: those the camera read
+/// (Xmp.Camera.CalibrationPicture 2) with the panel's area (Xmp.Camera.ReflectArea). IoError when
+/// there is none, saying why.
+std::vector<std::size_t> usable_panels(const std::vector<Item>& panels, const std::string& band, const fs::path& images,
+                                       const std::string& radiometry) {
+  std::vector<std::size_t> use;
+  std::vector<std::string> why;
+  for (std::size_t k = 0; k < panels.size(); ++k) {
+    const Item& p = panels[k];
+    if (p.band != band) continue;
+    if (p.meta.calibration_picture == 2 && p.meta.panel_area) use.push_back(k);
+    else
+      why.push_back(cat(p.source.generic_string(), p.meta.calibration_picture != 2
+                                                       ? " (CalibrationPicture 1: the camera could not read the panel)"
+                                                       : " (no Xmp.Camera.ReflectArea)"));
+  }
+  if (use.empty())
+    fail(images, cat("--radiometry ", radiometry, " needs a picture of the calibration panel in band ", band,
+                     " that the camera read (Xmp.Camera.CalibrationPicture 2, the panel's area in Xmp.Camera.ReflectArea); ",
+                     !why.empty()      ? "these are not: " + list_some(why, 3)
+                     : panels.empty() ? std::string("no capture in --images is marked as one")
+                                      : std::string("no panel capture holds this band"),
+                     "\n  msgs does not search images for a panel; use --radiometry reflectance (the DLS 2 alone) or",
+                     " auto (relative radiance)"));
+  return use;
+}
+
+/// The scale of `band` from its panel pictures `use` (msgs/io/calibration_panel.hpp): 1 / the mean
+/// of their irradiances in the sensor's units. Each picture is logged and appended to `report`.
+double calibrate_with_panels(std::vector<Item>& panels, const std::vector<std::size_t>& use, const std::string& band,
+                             const msgs::io::RadiometrySteps& steps, const std::map<std::string, double>& albedo_arg,
+                             const fs::path& images, nlohmann::ordered_json& report) {
+  double sum = 0.0, lo = 1e300, hi = 0.0;
+  for (std::size_t k : use) {
+    Item& p = panels[k];
+    const fs::path src = images / p.source;
+    double albedo = 0.0;
+    std::string albedo_from;
+    if (const auto a = albedo_arg.count(band) ? albedo_arg.find(band) : albedo_arg.find(""); a != albedo_arg.end()) {
+      albedo = a->second;
+      albedo_from = "--panel-albedo";
+    } else if (p.meta.panel_albedo) {
+      albedo = *p.meta.panel_albedo;
+      albedo_from = p.meta.source.at("panel_albedo");
+    } else {
+      fail(src, "Xmp.Camera.Albedo",
+           "missing: the panel's reflectance in this band is not known (give it from the panel's calibration sheet"
+           " with --panel-albedo 0.49, or per band --panel-albedo MS_G=0.49,MS_R=0.49,...)");
+    }
+    const BandImage img = read_band_image(src, band);
+    p.width = img.raw.width;
+    p.height = img.raw.height;
+    p.rad = msgs::io::frame_radiometry(p.meta, steps, img.dn_max, p.width, p.height);
+    const msgs::io::PanelReading reading = msgs::io::read_panel(img.raw, p.rad, *p.meta.panel_area, src);
+    const double e = reading.mean / albedo;
+    p.rad.scale = 1.0 / e;
+    sum += e;
+    lo = std::min(lo, e);
+    hi = std::max(hi, e);
+    const double watts = msgs::io::reflectance_irradiance(p.rad);  // 0 without MicaSense's a1
+    std::printf("  %s: panel %s, albedo %.4g (%s), %zu px: %s%s\n", band.c_str(), p.source.generic_string().c_str(),
+                albedo, albedo_from.c_str(), reading.pixels,
+                watts > 0 ? cat("irradiance ", msgs::io::short_number(watts, 4), " W/m^2/nm").c_str()
+                          : cat("irradiance ", msgs::io::short_number(e, 4), " in the sensor's units").c_str(),
+                steps.irradiance ? cat(", the light sensor read ", msgs::io::short_number(p.rad.irradiance, 4)).c_str() : "");
+    nlohmann::ordered_json j;
+    j["band"] = band;
+    j["source"] = p.source.generic_string();
+    j["albedo"] = albedo;
+    j["albedo_from"] = albedo_from;
+    j["area"] = *p.meta.panel_area;
+    j["pixels"] = reading.pixels;
+    j["saturated_pixels"] = reading.saturated;
+    j["mean_response"] = reading.mean;
+    if (watts > 0) j["irradiance_w_m2_nm"] = watts;
+    if (steps.irradiance) j["light_sensor_w_m2_nm"] = p.rad.irradiance;
+    if (!p.meta.panel_serial.empty()) j["panel_serial"] = p.meta.panel_serial;
+    report.push_back(j);
+  }
+  if (hi > 1.05 * lo)
+    std::printf("  warning: %s: the %zu panel pictures disagree by %.3g%% (%s); their mean is used\n", band.c_str(),
+                use.size(), 100.0 * (hi / lo - 1.0),
+                steps.irradiance ? "after the light sensor's readings: a shaded or tilted panel?"
+                                 : "the light changed between them? --radiometry panel+dls follows it with the DLS 2");
+  return double(use.size()) / sum;
 }
 
 /// A colmap stage with progress, timing, log and the log's tail on failure.
@@ -536,8 +725,8 @@ MergeResult merge_rest_models(const std::vector<Item>& items, std::size_t captur
 
 int run_import(const std::vector<std::string>& argv) {
   const msgs::cli::Args args(argv,
-                             {"images", "out", "camera", "bands", "eval-every", "camera-model", "radiometry", "matching", "window",
-                              "neighbours", "sift-threshold", "ba-tolerance", "merge-models", "rig", "colmap", "exiv2"},
+                             {"images", "out", "camera", "bands", "eval-every", "camera-model", "radiometry", "panel-albedo", "matching",
+                              "window", "neighbours", "sift-threshold", "ba-tolerance", "merge-models", "rig", "colmap", "exiv2"},
                              {"force", "allow-partial", "keep-work", "help"});
   if (args.flag("help")) {
     std::fputs(kUsage, stdout);
@@ -566,9 +755,21 @@ int run_import(const std::vector<std::string>& argv) {
   if (!model_params.count(model))
     throw msgs::cli::UsageError("--camera-model expects OPENCV, PINHOLE, SIMPLE_RADIAL or RADIAL, got '" + model + "'");
   const std::string radiometry = args.get("radiometry", "auto");
-  if (radiometry != "auto" && radiometry != "none" && radiometry != "reflectance")
-    throw msgs::cli::UsageError("--radiometry expects auto, none or reflectance, got '" + radiometry + "'");
-  const bool reflectance = radiometry == "reflectance";
+  const std::map<std::string, msgs::io::Calibration> calibrations = {
+      {"auto", msgs::io::Calibration::relative},
+      {"none", msgs::io::Calibration::relative},
+      {"reflectance", msgs::io::Calibration::sun_sensor},
+      {"panel", msgs::io::Calibration::panel},
+      {"panel+dls", msgs::io::Calibration::panel_and_sun_sensor}};
+  if (!calibrations.count(radiometry))
+    throw msgs::cli::UsageError("--radiometry expects auto, none, reflectance, panel or panel+dls, got '" + radiometry + "'");
+  const msgs::io::Calibration calibration = calibrations.at(radiometry);
+  const bool reflectance = calibration != msgs::io::Calibration::relative;
+  const bool by_panel =
+      calibration == msgs::io::Calibration::panel || calibration == msgs::io::Calibration::panel_and_sun_sensor;
+  const std::map<std::string, double> panel_albedo = parse_panel_albedo(args.get("panel-albedo", ""));
+  if (!panel_albedo.empty() && !by_panel)
+    throw msgs::cli::UsageError("--panel-albedo goes with --radiometry panel or panel+dls");
   const std::string matching = args.get("matching", "exhaustive");
   if (matching != "exhaustive" && matching != "window" && matching != "gps")
     throw msgs::cli::UsageError("--matching expects exhaustive, window or gps, got '" + matching + "'");
@@ -615,7 +816,7 @@ int run_import(const std::vector<std::string>& argv) {
   }
   if (ec) fail(images, cat("cannot list the folder: ", ec.message()));
   std::sort(files.begin(), files.end());
-  const msgs::io::CaptureScan scan = msgs::io::scan_capture_names(images, files, camera, patterns);
+  msgs::io::CaptureScan scan = msgs::io::scan_capture_names(images, files, camera, patterns);
   const auto counts = scan.band_counts();
   std::string band_list;
   for (const auto& b : msgs::io::standard_bands())
@@ -640,24 +841,7 @@ int run_import(const std::vector<std::string>& argv) {
       std::printf("  warning: %zu captures lack some band: %s\n", incomplete.size(), list_some(incomplete).c_str());
   }
 
-  std::vector<Item> items;
-  for (std::size_t ci = 0; ci < scan.captures.size(); ++ci)
-    for (const auto& b : msgs::io::standard_bands()) {
-      const auto it = scan.captures[ci].bands.find(b.id);
-      if (it == scan.captures[ci].bands.end()) continue;
-      Item item;
-      item.capture = ci;
-      item.band = b.id;
-      item.source = it->second;
-      char num[32];
-      std::snprintf(num, sizeof num, "_%05zu", ci + 1);
-      const bool rgb = b.channels == 3;
-      std::string ext = rgb ? it->second.extension().string() : ".png";
-      for (char& ch : ext) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
-      item.out_name = cat(b.id, num, ext);
-      item.colmap_name = cat(b.id, "/", b.id, num, ".png");
-      items.push_back(std::move(item));
-    }
+  std::vector<Item> items = scan_items(scan);
 
   // ---- temporary folders: layout (renamed to --out at the end) and COLMAP work
   msgs::io::StagedDirectory stage(out, ".import-tmp-");
@@ -678,7 +862,8 @@ int run_import(const std::vector<std::string>& argv) {
     // the positions.
     if (!msgs::cli::find_program(exiv2_arg)) {
       if (matching == "gps" || reflectance)
-        fail(exiv2_arg, cat(matching == "gps" ? "--matching gps reads the positions" : "--radiometry reflectance reads the metadata",
+        fail(exiv2_arg, cat(matching == "gps" ? "--matching gps reads the positions"
+                                              : "--radiometry " + radiometry + " reads the metadata",
                             " with exiv2, which was not found (install it: apt-get install exiv2, or point --exiv2 at it)"));
       std::printf("  warning: exiv2 not found (install it: apt-get install exiv2); keeping the stored values%s "
                   "and letting COLMAP guess the focal lengths\n",
@@ -727,12 +912,47 @@ int run_import(const std::vector<std::string>& argv) {
     }
   }
 
+  // ---- calibration-panel pictures are not part of the scene: set aside, for --radiometry panel
+  std::vector<Item> panels;  // their `capture` indexes panel_keys
+  std::vector<std::string> panel_keys;
+  {
+    std::set<std::size_t> marked;
+    for (const Item& it : items)
+      if (it.meta.calibration_picture != 0) marked.insert(it.capture);
+    if (!marked.empty()) {
+      for (std::size_t ci : marked) panel_keys.push_back(scan.captures[ci].key);
+      if (marked.size() == scan.captures.size())
+        fail(images, cat("every capture is a picture of a calibration panel (Xmp.Camera.CalibrationPicture): ",
+                         list_some(panel_keys), "; add the flight's captures to --images"));
+      std::map<fs::path, msgs::io::CaptureMeta> meta_of;
+      for (Item& it : items) {
+        if (!marked.count(it.capture)) {
+          meta_of[it.source] = std::move(it.meta);
+          continue;
+        }
+        it.capture = std::size_t(std::distance(marked.begin(), marked.find(it.capture)));
+        panels.push_back(std::move(it));
+      }
+      std::vector<msgs::io::CaptureFiles> flight;
+      for (std::size_t ci = 0; ci < scan.captures.size(); ++ci)
+        if (!marked.count(ci)) flight.push_back(std::move(scan.captures[ci]));
+      scan.captures = std::move(flight);
+      items = scan_items(scan);
+      for (Item& it : items) it.meta = std::move(meta_of.at(it.source));
+      std::printf("  %zu capture%s of a calibration panel set aside (Xmp.Camera.CalibrationPicture): %s%s\n",
+                  panel_keys.size(), panel_keys.size() == 1 ? "" : "s", list_some(panel_keys).c_str(),
+                  by_panel ? "" : " (--radiometry panel calibrates with them)");
+    }
+  }
+
   // ---- 3. radiometry: plan per band, pass 1 for the band maxima (relative radiance), pass 2 writes
   std::map<std::string, std::vector<std::size_t>> by_band;
   for (std::size_t i = 0; i < items.size(); ++i) by_band[items[i].band].push_back(i);
+  nlohmann::ordered_json panel_report = nlohmann::ordered_json::array();  // what each panel picture gave
   for (const auto& [band, idx] : by_band) {
     if (band == "D") continue;
     msgs::io::RadiometrySteps steps;
+    std::vector<std::size_t> band_panels;  // the panel pictures of this band that calibrate it
     if (have_meta && radiometry != "none") {
       std::vector<msgs::io::CaptureMeta> metas;
       std::vector<fs::path> srcs;
@@ -740,7 +960,14 @@ int run_import(const std::vector<std::string>& argv) {
         metas.push_back(items[i].meta);
         srcs.push_back(items[i].source);
       }
-      const auto plan = msgs::io::plan_band(metas, srcs, reflectance);
+      if (by_panel) {
+        band_panels = usable_panels(panels, band, images, radiometry);
+        for (std::size_t k : band_panels) {
+          metas.push_back(panels[k].meta);
+          srcs.push_back(panels[k].source);
+        }
+      }
+      const auto plan = msgs::io::plan_band(metas, srcs, calibration);
       steps = plan.steps;
       if (!plan.missing.empty()) {
         std::string what;
@@ -756,10 +983,14 @@ int run_import(const std::vector<std::string>& argv) {
               what += cat("\n    (", items[i].source.generic_string(), ": ", items[i].meta.irradiance_problem, ")");
               break;
             }
-          fail(images / srcs[0], cat("--radiometry reflectance needs every step, MicaSense's radiance calibration and",
-                                     " the DLS 2 irradiance in every image of band ", band, ":", what,
-                                     "\n  msgs computes reflectance from MicaSense's light sensor only; use",
-                                     " --radiometry auto for relative radiance"));
+          fail(images / srcs[0],
+               cat("--radiometry ", radiometry, " needs every step",
+                   calibration == msgs::io::Calibration::sun_sensor ? ", MicaSense's radiance calibration and the DLS 2 irradiance"
+                   : by_panel && calibration != msgs::io::Calibration::panel ? " and the DLS 2 irradiance"
+                                                                               : "",
+                   " in every image of band ", band, by_panel ? " and in its panel pictures" : "", ":", what,
+                   "\n  msgs computes reflectance from MicaSense's light sensor and panels only; use",
+                   " --radiometry auto for relative radiance"));
         }
         std::printf("  warning: %s: corrections left out for the whole band (%s):%s\n", band.c_str(),
                     steps.any() ? "the others are applied" : "stored values kept", what.c_str());
@@ -769,20 +1000,20 @@ int run_import(const std::vector<std::string>& argv) {
     for (std::size_t i : idx) {
       Item& it = items[i];
       const fs::path src = images / it.source;
-      const int bits = tiff_bits(src);
-      const double dn_max = bits == 16 ? 65535.0 : bits == 8 || bits == 0 ? 255.0 : 1.0;
-      if (bits != 8 && bits != 16 && bits != 0) fail(src, cat("unsupported ", bits, "-bit samples for a multispectral band (need 8 or 16)"));
-      const msgs::Image<float> raw = msgs::io::read_image(src);
-      if (raw.channels != 1) fail(src, cat("band ", band, " needs a single-channel image, this one has ", raw.channels));
+      const BandImage img = read_band_image(src, band);
+      const msgs::Image<float>& raw = img.raw;
       it.width = raw.width;
       it.height = raw.height;
-      it.rad = msgs::io::frame_radiometry(it.meta, steps, dn_max, raw.width, raw.height);
+      it.rad = msgs::io::frame_radiometry(it.meta, steps, img.dn_max, raw.width, raw.height);
       it.radiometry_applied = steps.any();
       if (it.radiometry_applied && !reflectance)
         mx = std::max(mx, double(msgs::io::max_value(msgs::io::normalise_image(raw, it.rad, src))));
     }
+    const double panel_scale =
+        by_panel ? calibrate_with_panels(panels, band_panels, band, steps, panel_albedo, images, panel_report) : 0.0;
     for (std::size_t i : idx)
-      items[i].rad.scale = reflectance                 ? msgs::io::reflectance_scale(items[i].rad)
+      items[i].rad.scale = by_panel                    ? panel_scale
+                           : reflectance                 ? msgs::io::reflectance_scale(items[i].rad)
                            : items[i].radiometry_applied ? msgs::io::band_scale(mx)
                                                          : 1.0 / items[i].rad.dn_max;
   }
@@ -811,16 +1042,34 @@ int run_import(const std::vector<std::string>& argv) {
     msgs::io::write_png8(work / "images" / it.colmap_name, sift_copy(norm));
   }
   if (reflectance) {
-    // How much the light changed over the flight, per band: what the irradiance step took out.
+    // The sunlight each band's reflectance was computed under (from MicaSense's a1): how much
+    // the light sensor saw it change over the flight, or the panel's single value.
     for (const auto& [band, idx] : by_band) {
       if (band == "D") continue;
-      double lo = 1e300, hi = 0;
+      double lo = 1e300, hi = 0, dls_lo = 1e300, dls_hi = 0;
       for (std::size_t i : idx) {
-        lo = std::min(lo, items[i].rad.irradiance);
-        hi = std::max(hi, items[i].rad.irradiance);
+        const double e = msgs::io::reflectance_irradiance(items[i].rad);
+        lo = std::min(lo, e);
+        hi = std::max(hi, e);
+        if (items[i].meta.irradiance) {
+          dls_lo = std::min(dls_lo, *items[i].meta.irradiance);
+          dls_hi = std::max(dls_hi, *items[i].meta.irradiance);
+        }
       }
-      std::printf("  %s: reflectance under %.4g to %.4g W/m^2/nm of sunlight (the light sensor's readings)\n", band.c_str(),
-                  lo, hi);
+      const std::string how = calibration == msgs::io::Calibration::sun_sensor ? "the light sensor's readings"
+                              : calibration == msgs::io::Calibration::panel    ? "the panel's"
+                                                                               : "the light sensor's readings, levelled by the panel";
+      if (lo > 0)
+        std::printf("  %s: reflectance under %s W/m^2/nm of sunlight (%s)\n", band.c_str(),
+                    (calibration == msgs::io::Calibration::panel ? msgs::io::short_number(lo, 4)
+                                                                 : cat(msgs::io::short_number(lo, 4), " to ", msgs::io::short_number(hi, 4)))
+                        .c_str(),
+                    how.c_str());
+      // One panel irradiance for a flight under changing light: the light sensor saw the change.
+      if (calibration == msgs::io::Calibration::panel && dls_hi > 1.05 * dls_lo)
+        std::printf("  warning: %s: the light sensor's readings change by %.3g%% over the flight, which one panel"
+                    " irradiance does not follow; --radiometry panel+dls does\n",
+                    band.c_str(), 100.0 * (dls_hi / dls_lo - 1.0));
     }
     for (const auto& [band, c] : clipped)  // (relative radiance peaks at 1 by construction)
       if (c[0] > 0)
@@ -983,6 +1232,8 @@ int run_import(const std::vector<std::string>& argv) {
   meta_json["placed_by_rig"] = rig.images.size();
   if (!rig.images.empty()) meta_json["rig"] = rig.report;
   meta_json["images"] = items.size();
+  if (!panel_keys.empty()) meta_json["calibration_captures_set_aside"] = panel_keys;
+  if (!panel_report.empty()) meta_json["calibration_panels"] = panel_report;
   meta_json["mean_reprojection_error_px"] = opt_number(reproj);
   meta_json["colmap_camera_model"] = model;
   meta_json["colmap_sift_peak_threshold"] = sift_threshold;
@@ -1051,19 +1302,14 @@ int run_import(const std::vector<std::string>& argv) {
                                       ? "fall-off: the image is divided by 1 + k0 r + k1 r^2 + ..."
                                       : "correction: the image is multiplied by 1 + k0 r + k1 r^2 + ...";
       if (s.row_gradient) rad["row_gradient_a2_a3"] = {it.rad.row_a2, it.rad.row_a3};
-      if (s.irradiance) {
+      if (reflectance && it.rad.radiance_a1 > 0) {
         rad["radiance_a1"] = it.rad.radiance_a1;
-        rad["irradiance_w_m2_nm"] = it.rad.irradiance;
+        rad["irradiance_w_m2_nm"] = msgs::io::reflectance_irradiance(it.rad);
       }
+      if (s.irradiance) rad["light_sensor_w_m2_nm"] = it.rad.irradiance;
       rad["scale"] = it.rad.scale;
       rad["dn_max"] = it.rad.dn_max;
-      rad["formula"] =
-          !it.radiometry_applied ? "value = DN / dn_max (stored values kept: no radiometric metadata)"
-          : s.irradiance ? "reflectance = (DN - black_level) / (exposure_s * gain * vignetting(r) * "
-                           "(1 + a2 y / exposure_s - a3 y) * irradiance) * scale, scale = pi * a1 / (dn_max + 1)"
-          : s.row_gradient
-              ? "value = (DN - black_level) / (exposure_s * gain * vignetting(r) * (1 + a2 y / exposure_s - a3 y)) * scale"
-              : "value = (DN - black_level) / (exposure_s * gain * vignetting(r)) * scale";
+      rad["formula"] = radiometry_formula(it.rad, it.radiometry_applied, calibration);
       if (it.meta.band_name) rad["band_name"] = *it.meta.band_name;
       if (it.meta.wavelength_nm) rad["wavelength_nm"] = *it.meta.wavelength_nm;
       // Which exiv2 key each quantity came from, to check against the camera's documentation.

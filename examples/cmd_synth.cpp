@@ -16,7 +16,7 @@ namespace {
 constexpr const char* kUsage =
     "usage: msgs synth --preset tiny|small|medium --out DIR [--seed S] [--force]\n"
     "       msgs synth --raw micasense|dji|sequoia --out DIR [--preset P] [--captures N] [--width W]\n"
-    "                  [--light-variation V] [--seed S] [--force]\n"
+    "                  [--light-variation V] [--dls-bias B] [--panel-captures N] [--seed S] [--force]\n"
     "\n"
     "Ray-trace a procedural outdoor scene (lawn, soil, trees, solar panels, pond, painted pad) seen\n"
     "by a 5-camera drone rig (RGB + G, R, RE, NIR) and write it in the public multi-spectral dataset\n"
@@ -37,7 +37,12 @@ constexpr const char* kUsage =
     "  --captures N number of captures (default: the preset's)\n"
     "  --width W    multispectral image width in pixels (height 3/4 of it, RGB 1.5x; default: the preset's)\n"
     "  --light-variation V  the sunlight of each capture varies by up to +-V (0 to 0.9; default 0),\n"
-    "               as under passing clouds (`msgs import --radiometry reflectance` divides it out)\n";
+    "               as under passing clouds (`msgs import --radiometry reflectance` divides it out)\n"
+    "  --dls-bias B the MicaSense light sensor reads (1 + B) x the sunlight (-0.5 to 1; default 0): a\n"
+    "               sensor error that `msgs import --radiometry panel+dls` takes out with the panel\n"
+    "  --panel-captures N  MicaSense only: N captures of a calibration panel after the flight's\n"
+    "               (default 0), marked as the camera marks them (CalibrationPicture, Albedo,\n"
+    "               ReflectArea), for `msgs import --radiometry panel`\n";
 
 int run_raw(const msgs::cli::Args& args) {
   msgs::synth::RawOptions opt;
@@ -48,7 +53,10 @@ int run_raw(const msgs::cli::Args& args) {
   opt.seed = static_cast<std::uint64_t>(seed);
   opt.captures = static_cast<int>(std::clamp(captures, -1L, 1000000L));
   opt.width = static_cast<int>(std::clamp(width, -1L, 1000000L));
-  opt.light_variation = args.number("light-variation", 0.0);  // range checked by write_synthetic_raw
+  // Ranges checked by write_synthetic_raw.
+  opt.light_variation = args.number("light-variation", 0.0);
+  opt.dls_bias = args.number("dls-bias", 0.0);
+  opt.panel_captures = static_cast<int>(std::clamp(args.integer("panel-captures", 0), -1L, 1000000L));
   opt.overwrite = args.flag("force");
   const std::string out = args.require("out");
   msgs::synth::RawSummary s;
@@ -59,7 +67,8 @@ int run_raw(const msgs::cli::Args& args) {
   }
   std::printf("synthetic raw %s captures (preset %s, seed %llu) written to %s\n", s.camera.c_str(), opt.preset.c_str(),
               static_cast<unsigned long long>(opt.seed), s.out.string().c_str());
-  std::printf("  captures: %d, files: %d\n", s.captures, s.files);
+  std::printf("  captures: %d%s, files: %d\n", s.captures,
+              s.panel_captures ? msgs::io::cat(" and ", s.panel_captures, " of a calibration panel").c_str() : "", s.files);
   std::printf("  multispectral %d x %d (16-bit TIFF)", s.ms_width, s.ms_height);
   if (s.camera != "micasense") std::printf(", RGB %d x %d (JPEG)", s.rgb_width, s.rgb_height);
   std::printf("\n  exposure 1/%.0f .. 1/%.0f s, ISO %d .. %d\n", 1.0 / s.min_exposure_s, 1.0 / s.max_exposure_s, s.min_iso,
@@ -69,15 +78,17 @@ int run_raw(const msgs::cli::Args& args) {
 }
 
 int run_synth(const std::vector<std::string>& argv) {
-  const msgs::cli::Args args(argv, {"preset", "out", "seed", "raw", "captures", "width", "light-variation"}, {"force", "help"});
+  const msgs::cli::Args args(
+      argv, {"preset", "out", "seed", "raw", "captures", "width", "light-variation", "dls-bias", "panel-captures"},
+      {"force", "help"});
   if (args.flag("help")) {
     std::fputs(kUsage, stdout);
     return 0;
   }
   if (!args.positional().empty()) throw msgs::cli::UsageError("unexpected argument '" + args.positional()[0] + "'");
   if (args.has("raw")) return run_raw(args);
-  if (args.has("captures") || args.has("width") || args.has("light-variation"))
-    throw msgs::cli::UsageError("--captures, --width and --light-variation need --raw");
+  for (const char* o : {"captures", "width", "light-variation", "dls-bias", "panel-captures"})
+    if (args.has(o)) throw msgs::cli::UsageError(std::string("--") + o + " needs --raw");
   msgs::synth::SynthOptions opt;
   opt.preset = args.get("preset", "tiny");
   try {

@@ -1,6 +1,7 @@
 // fuzz/fuzz_import_meta.cpp
 // libFuzzer target for the pure parts of `msgs import`: exiv2 output parsing
-// (io::parse_capture_meta with GPS positions and the pairs formed from them, io::split_exiv2_output), --bands pattern parsing and file-name
+// (io::parse_capture_meta with GPS positions and the pairs formed from them, a calibration panel's
+// area read from a small picture, io::split_exiv2_output), --bands pattern parsing and file-name
 // recognition (io::parse_band_patterns, io::scan_capture_names with every camera scheme).
 //
 // Input: exiv2 text, then optionally a NUL byte, a --bands spec line and file names one per line.
@@ -18,6 +19,7 @@
 #include <vector>
 
 #include "fuzz_common.hpp"
+#include "msgs/io/calibration_panel.hpp"
 #include "msgs/io/capture_meta.hpp"
 #include "msgs/io/capture_names.hpp"
 #include "msgs/io/match_pairs.hpp"
@@ -46,12 +48,24 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     io::check_radiometry(r, 8, 6, "fuzz.tif");
     (void)io::relative_radiance(1000.0, 3.0, 2.0, r);
     // And the plan for reflectance, where nothing is missing.
-    const io::BandPlan refl = io::plan_band({m, m}, {"a.tif", "b.tif"}, true);
+    const io::BandPlan refl = io::plan_band({m, m}, {"a.tif", "b.tif"}, io::Calibration::sun_sensor);
     if (refl.missing.empty()) {
       io::FrameRadiometry q = io::frame_radiometry(m, refl.steps, 65535.0, 8, 6);
       q.scale = io::reflectance_scale(q);
       io::check_radiometry(q, 8, 6, "fuzz.tif");
       (void)io::relative_radiance(1000.0, 3.0, 2.0, q);
+    }
+    // A panel's area, however odd its corners, reads as a finite mean or an IoError.
+    if (m.panel_area) {
+      const io::BandPlan pp = io::plan_band({m}, {"p.tif"}, io::Calibration::panel);
+      io::FrameRadiometry pr = io::frame_radiometry(m, pp.steps, 65535.0, 24, 18);
+      msgs::Image<float> img(24, 18, 1);
+      for (std::size_t i = 0; i < img.data.size(); ++i) img.data[i] = float(i % 7) / 8.0f + 0.1f;
+      const io::PanelReading reading = io::read_panel(img, pr, *m.panel_area, "p.tif");
+      if (!std::isfinite(reading.mean) || !(reading.mean > 0) || reading.pixels < io::kMinPanelPixels) {
+        std::fprintf(stderr, "read_panel: a reading that is not a positive mean of enough pixels\n");
+        std::abort();
+      }
     }
     // A position that was read is a finite place on the Earth, and pairs can be formed from it.
     if (m.gps) {

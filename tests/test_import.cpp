@@ -173,6 +173,26 @@ double median(std::vector<double> v) {
   return v.empty() ? 0.0 : v[v.size() / 2];
 }
 
+/// The median over the pixels of frame `f` of an import `ds` of raw set dir/raw (written with
+/// `opt`) of its value over the scene's value there (the reflectance): over the pixels the 16 bits
+/// hold without clipping, away from the darkest and brightest.
+double median_ratio_to_truth(const fs::path& dir, const fs::path& ds, const Json& f, const msgs::synth::SynthScene& scene,
+                             const msgs::synth::RawOptions& opt) {
+  const std::string src = f["source"];
+  const auto truth = micasense_truth(scene, opt, src);
+  const auto norm = msgs::io::read_image(ds / f["file_path"].get<std::string>());
+  const auto raw = msgs::io::read_image(dir / "raw" / src);
+  std::vector<double> ratio;
+  for (int y = 0; y < truth.height; ++y)
+    for (int x = 0; x < truth.width; ++x) {
+      const double t = truth.at(x, y, 0);
+      if (t < 0.02 || t > 0.95 || raw.at(x, y, 0) * 65535.0 > 65000) continue;
+      ratio.push_back(norm.at(x, y, 0) / t);
+    }
+  REQUIRE(ratio.size() > 1000);
+  return median(ratio);
+}
+
 /// A frame of an imported synthetic flight against the scene's camera that rendered it.
 struct FrameError {
   std::string source, band, pose;  ///< as transforms.json has them
@@ -461,20 +481,9 @@ TEST_CASE("msgs import --radiometry reflectance: the DLS 2 takes out changing su
     e_lo = std::min(e_lo, e);
     e_hi = std::max(e_hi, e);
     // The scene's values are the reflectances: every image, whatever its exposure and light,
-    // gives them back (the pixels the 16 bits hold without clipping).
-    const std::string src = f["source"];
-    const auto truth = micasense_truth(scene, opt, src);
-    const auto norm = msgs::io::read_image(dir / "ds" / f["file_path"].get<std::string>());
-    const auto raw = msgs::io::read_image(dir / "raw" / src);
-    std::vector<double> ratio;
-    for (int y = 0; y < truth.height; ++y)
-      for (int x = 0; x < truth.width; ++x) {
-        const double t = truth.at(x, y, 0);
-        if (t < 0.02 || t > 0.95 || raw.at(x, y, 0) * 65535.0 > 65000) continue;
-        ratio.push_back(norm.at(x, y, 0) / t);
-      }
-    REQUIRE(ratio.size() > 1000);
-    CHECK_MESSAGE(median(ratio) == doctest::Approx(1.0).epsilon(0.01), src);
+    // gives them back.
+    CHECK_MESSAGE(median_ratio_to_truth(dir, dir / "ds", f, scene, opt) == doctest::Approx(1.0).epsilon(0.01),
+                  f["source"].get<std::string>());
   }
   CHECK(e_hi / e_lo > 1.2);  // the light did change
 
@@ -493,6 +502,85 @@ TEST_CASE("msgs import --radiometry reflectance: the DLS 2 takes out changing su
   CHECK_MESSAGE(text.find("horizontal irradiance (MicaSense DLS 2) missing in 2 of 2 files") != std::string::npos, text);
   CHECK(!fs::exists(dir / "dji"));
   CHECK(!leftovers(dir, "dji"));
+}
+
+TEST_CASE("msgs import --radiometry panel, panel+dls: the panel capture is set aside and sets the reflectance's level") {
+  // Sunlight that changes by up to 25%, a light sensor that reads 10% high, and one capture of a
+  // calibration panel after the flight (IMG_0006).
+  msgs::synth::RawOptions opt = small_micasense_set();
+  opt.light_variation = 0.25;
+  opt.dls_bias = 0.1;
+  opt.panel_captures = 1;
+  const auto dir_or = colmap_case("panel", "reflectance from a calibration panel", opt);
+  if (!dir_or) return;
+  const fs::path& dir = *dir_or;
+  const msgs::synth::SynthScene scene = msgs::synth::make_scene(raw_set_preset(opt), opt.seed);
+  const int panel_capture = opt.captures;  // 0-based
+
+  // The panel sets the level, the light sensor follows the light: the scene's reflectances back.
+  const auto both = import_ok(dir, "both", "--radiometry panel+dls");
+  REQUIRE_MESSAGE(both.first == 0, both.second);
+  CHECK_MESSAGE(both.second.find("1 capture of a calibration panel set aside (Xmp.Camera.CalibrationPicture): IMG_0006") !=
+                    std::string::npos,
+                both.second);
+  CHECK(!leftovers(dir, "both"));
+  Json tf = Json::parse(slurp(dir / "both" / "transforms.json"));
+  REQUIRE(tf["frames"].size() == 20);
+  CHECK(tf["msgs_import"]["captures"] == 5);
+  CHECK(tf["msgs_import"]["calibration_captures_set_aside"] == Json::array({"IMG_0006"}));
+  const auto& panels = tf["msgs_import"]["calibration_panels"];
+  REQUIRE(panels.size() == 4);
+  for (const auto& p : panels) {
+    CHECK(p["source"].get<std::string>().rfind("IMG_0006_", 0) == 0);
+    CHECK(p["albedo_from"] == "Xmp.Camera.Albedo");
+    CHECK(p["pixels"].get<int>() > 400);
+    // The light sensor read 10% more than the panel's irradiance.
+    CHECK(p["light_sensor_w_m2_nm"].get<double>() / p["irradiance_w_m2_nm"].get<double>() ==
+          doctest::Approx(1.1).epsilon(0.01));
+  }
+  for (const auto& f : tf["frames"]) {
+    CHECK(f["source"].get<std::string>().rfind("IMG_0006", 0) != 0);
+    CHECK_MESSAGE(median_ratio_to_truth(dir, dir / "both", f, scene, opt) == doctest::Approx(1.0).epsilon(0.01),
+                  f["source"].get<std::string>());
+  }
+
+  // The panel alone: every frame under the panel capture's light, off by the light's change.
+  const auto alone = import_ok(dir, "alone", "--radiometry panel");
+  REQUIRE_MESSAGE(alone.first == 0, alone.second);
+  CHECK_MESSAGE(alone.second.find("which one panel irradiance does not follow; --radiometry panel+dls does") !=
+                    std::string::npos,
+                alone.second);
+  tf = Json::parse(slurp(dir / "alone" / "transforms.json"));
+  REQUIRE(tf["frames"].size() == 20);
+  for (const auto& f : tf["frames"]) {
+    const std::string src = f["source"];
+    const int capture = std::stoi(src.substr(4, 4)) - 1;
+    const double expected = msgs::synth::raw_light(opt.seed, capture, opt.light_variation) /
+                            msgs::synth::raw_light(opt.seed, panel_capture, opt.light_variation);
+    CHECK_MESSAGE(median_ratio_to_truth(dir, dir / "alone", f, scene, opt) == doctest::Approx(expected).epsilon(0.01), src);
+  }
+
+  // Without a panel capture, and --panel-albedo without a panel mode: refused, nothing left behind.
+  msgs::synth::RawOptions plain = small_micasense_set();
+  plain.captures = 2;
+  plain.width = 48;
+  msgs::synth::write_synthetic_raw(dir / "raw_plain", plain);
+  const auto refused = [&](const std::string& flags, const std::string& out) {
+    const int rc = run(std::string(MSGS_BIN) + " import " + flags + " --images '" + (dir / "raw_plain").string() +
+                           "' --out '" + (dir / out).string() + "'",
+                       dir / (out + ".log"));
+    CHECK(!fs::exists(dir / out));
+    CHECK(!leftovers(dir, out));
+    return std::make_pair(rc, slurp(dir / (out + ".log")));
+  };
+  const auto none = refused("--radiometry panel", "none");
+  CHECK(none.first == 1);
+  CHECK_MESSAGE(none.second.find("needs a picture of the calibration panel in band MS_G") != std::string::npos, none.second);
+  CHECK_MESSAGE(none.second.find("no capture in --images is marked as one") != std::string::npos, none.second);
+  const auto usage = refused("--panel-albedo 0.5", "usage");
+  CHECK(usage.first == 2);
+  CHECK_MESSAGE(usage.second.find("--panel-albedo goes with --radiometry panel or panel+dls") != std::string::npos,
+                usage.second);
 }
 
 TEST_CASE("msgs import --matching window and gps: the pairs of nearby captures register the whole set") {

@@ -1,9 +1,12 @@
 // tests/test_radiometry.cpp
-// Tests for include/msgs/io/capture_meta.hpp (exiv2 output -> metadata) and
-// include/msgs/io/radiometry.hpp (DN -> relative radiance): known values, vignetting conventions,
-// band planning with missing tags, and clear errors for malformed text instead of crashes.
+// Tests for include/msgs/io/capture_meta.hpp (exiv2 output -> metadata),
+// include/msgs/io/radiometry.hpp (DN -> relative radiance or reflectance) and
+// include/msgs/io/calibration_panel.hpp (a panel picture -> the band's irradiance): known values,
+// vignetting conventions, band planning with missing tags, and clear errors for malformed text
+// and unusable panel pictures instead of crashes.
 #include <doctest/doctest.h>
 
+#include <msgs/io/calibration_panel.hpp>
 #include <msgs/io/capture_meta.hpp>
 #include <msgs/io/radiometry.hpp>
 
@@ -280,18 +283,18 @@ TEST_CASE("radiometry: reflectance from MicaSense's a1 and the DLS 2 irradiance"
   CHECK(with("RedEdge-P", "v1.0.0").irradiance.has_value());  // not affected
 
   // The plan for reflectance needs every step, a1 and the irradiance in every image.
-  const BandPlan p = plan_band({m, m}, {"a.tif", "b.tif"}, true);
+  const BandPlan p = plan_band({m, m}, {"a.tif", "b.tif"}, Calibration::sun_sensor);
   CHECK(p.missing.empty());
   CHECK(p.steps.irradiance);
   CHECK(!plan_band({m, m}, {"a.tif", "b.tif"}).steps.irradiance);  // relative radiance ignores it
   CaptureMeta dark = m;
   dark.irradiance.reset();
-  const BandPlan q = plan_band({m, dark}, {"a.tif", "b.tif"}, true);
+  const BandPlan q = plan_band({m, dark}, {"a.tif", "b.tif"}, Calibration::sun_sensor);
   CHECK(!q.steps.irradiance);
   REQUIRE(q.missing.count("horizontal irradiance (MicaSense DLS 2)") == 1);
   CHECK(q.missing.at("horizontal irradiance (MicaSense DLS 2)") == std::vector<std::filesystem::path>{"b.tif"});
   const CaptureMeta plain = parse_capture_meta(kMicaSense, "c.tif");
-  const BandPlan none = plan_band({plain}, {"c.tif"}, true);
+  const BandPlan none = plan_band({plain}, {"c.tif"}, Calibration::sun_sensor);
   CHECK(none.missing.count("radiance calibration a1 (MicaSense RadiometricCalibration)") == 1);
   CHECK(none.missing.count("row gradient (MicaSense RadiometricCalibration)") == 1);
 
@@ -310,6 +313,90 @@ TEST_CASE("radiometry: reflectance from MicaSense's a1 and the DLS 2 irradiance"
   CHECK(normalise_image(img, r, "a.tif").at(int(x), int(y), 0) == doctest::Approx(rho).epsilon(1e-4));
   r.irradiance = 0;
   CHECK_THROWS_WITH_AS(normalise_image(img, r, "a.tif"), doctest::Contains("a.tif: irradiance 0"), IoError);
+}
+
+TEST_CASE("calibration panel: tags, the area's pixels, the band's irradiance, and unusable pictures") {
+  const std::string cal = "Xmp.MicaSense.RadiometricCalibration          0.000145914, 1.39479e-07, 1.17145e-05\n";
+  const std::string panel = std::string(kMicaSense) + cal +
+                            "Xmp.Camera.CalibrationPicture                 2\n"
+                            "Xmp.Camera.Albedo                             0.4985\n"
+                            "Xmp.Camera.ReflectArea                        60,40,40,40,40,60,60,60\n"
+                            "Xmp.Camera.PanelSerial                        RP04-1234567-OB\n";
+  const CaptureMeta m = parse_capture_meta(panel, "IMG_0006_2.tif");
+  CHECK(m.calibration_picture == 2);
+  REQUIRE(m.panel_albedo.has_value());
+  CHECK(*m.panel_albedo == doctest::Approx(0.4985));
+  REQUIRE(m.panel_area.has_value());
+  CHECK((*m.panel_area)[1] == std::array<double, 2>{40, 40});
+  CHECK(m.panel_serial == "RP04-1234567-OB");
+  CHECK(parse_capture_meta(kMicaSense, "a.tif").calibration_picture == 0);
+  for (const char* bad : {"Xmp.Camera.CalibrationPicture 3\n", "Xmp.Camera.Albedo 1.5\n", "Xmp.Camera.Albedo 0\n",
+                          "Xmp.Camera.ReflectArea 1,2,3,4,5,6\n", "Xmp.Camera.ReflectArea 1,2,3,4,5,6,7,x\n"}) {
+    CAPTURE(bad);
+    CHECK_THROWS_WITH_AS(parse_capture_meta(bad, "p.tif"), doctest::Contains("p.tif: field 'Xmp.Camera."), IoError);
+  }
+
+  // The quadrilateral: corners in either direction; a bow tie or a sliver is not an area.
+  const PanelArea square = {{{60, 40}, {40, 40}, {40, 60}, {60, 60}}};
+  const PanelArea reversed = {{{60, 60}, {40, 60}, {40, 40}, {60, 40}}};
+  CHECK(convex_quad(square));
+  CHECK(convex_quad(reversed));
+  CHECK(!convex_quad({{{60, 40}, {40, 60}, {40, 40}, {60, 60}}}));
+  CHECK(!convex_quad({{{0, 0}, {10, 0}, {20, 0}, {5, 5}}}));
+  CHECK(inside_quad(square, 50, 50));
+  CHECK(inside_quad(square, 40, 60));  // a corner
+  CHECK(inside_quad(reversed, 60, 50));  // an edge
+  CHECK(!inside_quad(square, 61, 50));
+  const PanelArea diamond = {{{50, 30}, {30, 50}, {50, 70}, {70, 50}}};
+  CHECK(inside_quad(diamond, 50, 50));
+  CHECK(!inside_quad(diamond, 35, 35));
+
+  // A picture whose panel area is reflectance 0.4985 under E = 0.1 W/m^2/nm (a dim sky), through
+  // MicaSense's model (DN = black + radiance 2^16 / a1 x response), and a brighter background that
+  // must not count.
+  const BandPlan plan = plan_band({m}, {"IMG_0006_2.tif"}, Calibration::panel);
+  CHECK(plan.missing.empty());
+  CHECK(!plan.steps.irradiance);
+  FrameRadiometry r = frame_radiometry(m, plan.steps, 65535, 160, 120);
+  const double e = 0.1, a1 = 0.000145914;
+  msgs::Image<float> img(160, 120, 1);
+  for (int y = 0; y < 120; ++y)
+    for (int x = 0; x < 160; ++x) {
+      const double rho = inside_quad(square, x, y) ? 0.4985 : 0.9;
+      const double response = r.exposure_s * r.gain * vignetting_falloff(r, x, y) * row_gradient_factor(r, y);
+      img.at(x, y, 0) = float((4800 + rho * e / 3.14159265358979 * 65536 / a1 * response) / 65535);
+    }
+  const PanelReading reading = read_panel(img, r, *m.panel_area, "IMG_0006_2.tif");
+  CHECK(reading.pixels == 21 * 21);  // whole pixels on the edges count
+  CHECK(reading.saturated == 0);
+  // The band's scale 1 / E in the sensor's units; with a1, E in W/m^2/nm.
+  r.scale = *m.panel_albedo / reading.mean;
+  CHECK(reflectance_irradiance(r) == doctest::Approx(e).epsilon(1e-4));
+  CHECK(relative_radiance(double(img.at(50, 50, 0)) * 65535, 50, 50, r) * r.scale == doctest::Approx(0.4985).epsilon(1e-4));
+
+  // Unusable pictures: errors naming the file and what to do.
+  const PanelArea outside = {{{500, 40}, {480, 40}, {480, 60}, {500, 60}}};
+  CHECK_THROWS_WITH_AS(read_panel(img, r, outside, "p.tif"), doctest::Contains("holds 0 pixels of the 160x120 image"), IoError);
+  CHECK_THROWS_WITH_AS(read_panel(img, r, {{{60, 40}, {40, 60}, {40, 40}, {60, 60}}}, "p.tif"),
+                       doctest::Contains("p.tif: field 'Xmp.Camera.ReflectArea'"), IoError);
+  msgs::Image<float> clipped = img;
+  for (int x = 40; x <= 60; ++x) clipped.at(x, 45, 0) = 1.0f;  // 21 of 441 pixels: 4.8%
+  CHECK_THROWS_WITH_AS(read_panel(clipped, r, square, "p.tif"),
+                       doctest::Contains("21 of the 441 pixels of the panel area have clipped"), IoError);
+  msgs::Image<float> dark(160, 120, 1);  // all at the black level: not a panel
+  for (float& v : dark.data) v = float(4800.0 / 65535);
+  CHECK_THROWS_WITH_AS(read_panel(dark, r, square, "p.tif"), doctest::Contains("no brighter than the black level"), IoError);
+
+  // panel+dls needs the light sensor in every image; the panel alone needs neither it nor a1.
+  CaptureMeta no_a1 = m;
+  no_a1.radiance_a1.reset();
+  CHECK(plan_band({no_a1}, {"a.tif"}, Calibration::panel).missing.empty());
+  const BandPlan both = plan_band({no_a1}, {"a.tif"}, Calibration::panel_and_sun_sensor);
+  CHECK(both.missing.count("horizontal irradiance (MicaSense DLS 2)") == 1);
+  CHECK(both.missing.count("radiance calibration a1 (MicaSense RadiometricCalibration)") == 0);
+  CaptureMeta no_black = m;
+  no_black.black_level.reset();
+  CHECK(plan_band({m, no_black}, {"a.tif", "b.tif"}, Calibration::panel).missing.count("black level") == 1);
 }
 
 TEST_CASE("radiometry: a vignetting model that brightens the image's edge is an error") {

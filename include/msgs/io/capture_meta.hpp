@@ -33,6 +33,11 @@
 //                 reason in `irradiance_problem`, for a RedEdge / RedEdge-M before firmware 5.1.7 and
 //                 an Altum before 1.2.3 (Exif.Image.Model, Exif.Image.Software), whose firmware
 //                 wrote it wrongly
+//   panel         Xmp.Camera.CalibrationPicture (Pix4D's tag, which MicaSense writes: 0 a flight
+//                 image, 1 a picture of a calibration panel the camera could not read, 2 one it read;
+//                 a Sequoia writes 1 and 2 for any panel picture), Xmp.Camera.Albedo (the panel's
+//                 reflectance in this band), Xmp.Camera.ReflectArea (the four corners of the panel's
+//                 reflecting area, x and y in pixels), Xmp.Camera.PanelSerial
 //   focal length  Exif.Photo.FocalLength, Xmp.exif.FocalLength (mm)
 //   focal plane   Exif.Photo.FocalPlaneXResolution / YResolution / ResolutionUnit and the same in
 //                 Xmp.exif (unit 2 inch, the EXIF default, 3 cm, 4 mm, 5 micrometre)
@@ -86,6 +91,13 @@ struct CaptureMeta {
   std::optional<double> irradiance;
   /// Why an irradiance the file holds was not taken (a firmware known to write it wrongly).
   std::string irradiance_problem;
+  /// Xmp.Camera.CalibrationPicture: 0 a flight image, 1 a panel picture the camera could not
+  /// read, 2 one it read (a Sequoia writes 1 or 2 for either).
+  int calibration_picture = 0;
+  std::optional<double> panel_albedo;  ///< the panel's reflectance in this band (0..1]
+  /// The corners of the panel's reflecting area in the image, (x, y) in pixels, in the camera's order.
+  std::optional<std::array<std::array<double, 2>, 4>> panel_area;
+  std::string panel_serial;
   std::optional<double> focal_length_mm;
   std::optional<double> focal_plane_px_per_mm;  ///< x resolution, converted to pixels per mm
   std::optional<int> bits_per_sample;
@@ -122,7 +134,8 @@ inline const std::vector<std::string>& exiv2_metadata_keys() {
       "Xmp.exif.GPSAltitudeRef", "Xmp.Camera.BlackCurrent", "Xmp.drone-dji.ExposureTime", "Exif.Image.Make",
       "Xmp.Camera.VignettingPolynomial2D", "Xmp.Camera.VignettingPolynomial2DName",
       "Xmp.MicaSense.RadiometricCalibration", "Xmp.Camera.HorizontalIrradiance", "Xmp.DLS.HorizontalIrradiance",
-      "Xmp.Camera.IrradianceScaleToSIUnits", "Exif.Image.Model", "Exif.Image.Software"};
+      "Xmp.Camera.IrradianceScaleToSIUnits", "Exif.Image.Model", "Exif.Image.Software", "Xmp.Camera.CalibrationPicture",
+      "Xmp.Camera.Albedo", "Xmp.Camera.ReflectArea", "Xmp.Camera.PanelSerial"};
   return keys;
 }
 
@@ -491,6 +504,28 @@ inline CaptureMeta capture_meta_from_exiv2(const std::map<std::string, std::stri
       m.source["irradiance"] = e->first;
     }
   }
+  if (auto e = first({"Xmp.Camera.CalibrationPicture"})) {
+    const double c = number(*e, "0, 1 or 2 (not a panel, an unread panel, a read one)", false);
+    if (c != 0 && c != 1 && c != 2) bad(*e, "0, 1 or 2 (not a panel, an unread panel, a read one)");
+    m.calibration_picture = int(c);
+    m.source["calibration_picture"] = e->first;
+  }
+  if (auto e = first({"Xmp.Camera.Albedo"})) {
+    // A list (one value per band of a multi-page file) gives this page's first value.
+    const double a = number(*e, "a panel reflectance in (0, 1]", true);
+    if (!(a <= 1)) bad(*e, "a panel reflectance in (0, 1]");
+    m.panel_albedo = a;
+    m.source["panel_albedo"] = e->first;
+  }
+  if (auto e = first({"Xmp.Camera.ReflectArea"})) {
+    const auto list = detail::parse_number_list(e->second, 8);
+    if (!list || list->size() != 8) bad(*e, "eight numbers (x, y of the panel area's four corners, in pixels)");
+    std::array<std::array<double, 2>, 4> q{};
+    for (std::size_t i = 0; i < 4; ++i) q[i] = {(*list)[2 * i], (*list)[2 * i + 1]};
+    m.panel_area = q;
+    m.source["panel_area"] = e->first;
+  }
+  if (auto e = first({"Xmp.Camera.PanelSerial"})) m.panel_serial = std::string(detail::trim(e->second)).substr(0, 64);
   if (auto e = first({"Exif.Photo.FocalLength", "Xmp.exif.FocalLength"})) {
     m.focal_length_mm = number(*e, "a focal length in mm (> 0)", true);
     m.source["focal_length_mm"] = e->first;

@@ -19,6 +19,14 @@
 //
 // with a1 MicaSense's radiometric calibration (radiance in W/m^2/sr/nm) and E the horizontal
 // irradiance (W/m^2/nm) that the DLS 2 recorded with the capture. Every step is then required.
+//
+// Reflectance from a calibration panel (`--radiometry panel`, as MicaSense's batch processing
+// does): a picture of a panel of known reflectance rho (its albedo) gives the band's irradiance in
+// the sensor's own units, E = mean over the panel's area of (DN - black_level) / response / rho,
+// and every image of the band becomes R = (DN - black_level) / (response * E). With several panel
+// pictures, E is their mean. `--radiometry panel+dls` (MicaSense's tutorial 3) keeps the light
+// sensor for the changes of the sunlight during the flight and lets the panel set its level: the
+// response then includes the DLS 2 irradiance of each picture, the panel's and the flight's.
 #pragma once
 
 #include <algorithm>
@@ -60,6 +68,14 @@ struct FrameRadiometry {
   double scale = 1.0;  ///< common factor of the band; for reflectance pi a1 / 2^bits
 };
 
+/// What a band's values are made to mean.
+enum class Calibration {
+  relative,              ///< relative radiance: one factor per band, its brightest value 1
+  sun_sensor,            ///< reflectance from MicaSense's a1 and the DLS 2 irradiance
+  panel,                 ///< reflectance from calibration-panel pictures: one irradiance per band
+  panel_and_sun_sensor,  ///< the panel sets the DLS 2 irradiance's level, which follows the light
+};
+
 /// What plan_band decided for a band, with the reasons.
 struct BandPlan {
   RadiometrySteps steps;
@@ -68,11 +84,12 @@ struct BandPlan {
 };
 
 /// Decide which steps a band gets: a step is applied when every image of the band has its tags
-/// (black level; exposure time; gain or ISO; vignetting polynomial and centre). For reflectance
-/// every step, MicaSense's a1 and the irradiance are needed too: `missing` then lists what the
-/// caller must refuse.
+/// (black level; exposure time; gain or ISO; vignetting polynomial and centre). Reflectance needs
+/// every step (MicaSense's row gradient wherever the camera writes it, always for the light
+/// sensor's), MicaSense's a1 for the light sensor's, and the irradiance in every image where the
+/// light sensor takes part: `missing` then lists what the caller must refuse.
 inline BandPlan plan_band(const std::vector<CaptureMeta>& metas, const std::vector<std::filesystem::path>& files,
-                          bool reflectance = false) {
+                          Calibration calibration = Calibration::relative) {
   BandPlan plan;
   auto check = [&](const char* tag, auto&& has) {
     std::vector<std::filesystem::path> lacking;
@@ -81,22 +98,24 @@ inline BandPlan plan_band(const std::vector<CaptureMeta>& metas, const std::vect
     if (!lacking.empty()) plan.missing[tag] = std::move(lacking);
     return plan.missing.count(tag) == 0 && !metas.empty();
   };
+  const bool sun = calibration == Calibration::sun_sensor || calibration == Calibration::panel_and_sun_sensor;
   plan.steps.black_level = check("black level", [](const CaptureMeta& m) { return m.black_level.has_value(); });
   plan.steps.exposure = check("exposure time", [](const CaptureMeta& m) { return m.exposure_s.has_value(); });
   plan.steps.gain = check("gain/ISO", [](const CaptureMeta& m) { return m.gain.has_value(); });
   plan.steps.vignetting = check("vignetting polynomial+centre", [](const CaptureMeta& m) { return m.has_vignetting(); });
   // MicaSense's row gradient needs the exposure time. Only MicaSense writes it, so a band none of
   // whose images has it is not missing anything.
-  if (reflectance || std::any_of(metas.begin(), metas.end(), [](const CaptureMeta& m) { return m.row_gradient.has_value(); }))
+  if (calibration == Calibration::sun_sensor ||
+      std::any_of(metas.begin(), metas.end(), [](const CaptureMeta& m) { return m.row_gradient.has_value(); }))
     plan.steps.row_gradient =
         check("row gradient (MicaSense RadiometricCalibration)", [](const CaptureMeta& m) { return m.row_gradient.has_value(); }) &&
         plan.steps.exposure;
-  if (reflectance) {
+  if (calibration == Calibration::sun_sensor)
     check("radiance calibration a1 (MicaSense RadiometricCalibration)",
           [](const CaptureMeta& m) { return m.radiance_a1.has_value(); });
+  if (sun)
     plan.steps.irradiance =
         check("horizontal irradiance (MicaSense DLS 2)", [](const CaptureMeta& m) { return m.irradiance.has_value(); });
-  }
   return plan;
 }
 
@@ -134,6 +153,14 @@ inline FrameRadiometry frame_radiometry(const CaptureMeta& m, const RadiometrySt
 /// with 2^bits = dn_max + 1 (65536 for 16-bit files, as MicaSense's library divides).
 inline double reflectance_scale(const FrameRadiometry& r) {
   return std::numbers::pi * r.radiance_a1 / (r.dn_max + 1.0);
+}
+
+/// The irradiance (W/m^2/nm) under which a reflectance image `r` was computed, from MicaSense's a1:
+/// R = pi a1 (DN - black) / 2^bits / (response x E) = (DN - black) / response x scale (response
+/// including the light sensor's reading where that step is on). 0 without a1.
+inline double reflectance_irradiance(const FrameRadiometry& r) {
+  if (!(r.radiance_a1 > 0) || !(r.scale > 0)) return 0.0;
+  return (r.steps.irradiance ? r.irradiance : 1.0) * reflectance_scale(r) / r.scale;
 }
 
 /// 1 + k0 r + k1 r^2 + ... (Horner).

@@ -14,7 +14,8 @@
 //              records row y brighter by 1 + a2 y / exposure - a3 y; a real RedEdge's values,
 //              scaled to the image height; a1 such that pi x radiance / irradiance gives back the
 //              scene's values), Camera:HorizontalIrradiance + Camera:IrradianceScaleToSIUnits (a
-//              DLS 2's reading of the capture's sunlight, see RawOptions::light_variation),
+//              DLS 2's reading of the capture's sunlight, see RawOptions::light_variation and
+//              dls_bias),
 //              exif:ExposureTime, exif:ISOSpeedRatings, exif:FocalLength,
 //              exif:FocalPlaneXResolution/YResolution/ResolutionUnit (4 = mm). Real MicaSense files
 //              keep exposure, ISO, focal length and black level in EXIF IFDs instead; the importer
@@ -38,6 +39,11 @@
 //
 // Exposure time and ISO vary per capture and band (an auto-exposing camera), seeded: the same
 // seed gives the same bytes.
+//
+// MicaSense sets can end with captures of a calibration panel (RawOptions::panel_captures), as the
+// camera takes them on the ground: a grey panel of reflectance raw_panel_albedo() on a darker
+// background, seen a little off-centre and turned, with Camera:CalibrationPicture 2, Camera:Albedo,
+// Camera:ReflectArea (the corners of the panel's inner area, whole pixels) and Camera:PanelSerial.
 #pragma once
 
 #include <stb/stb_image_write.h>
@@ -75,6 +81,11 @@ struct RawOptions {
   /// The sunlight of each capture is 1 +- this (uniform, the same for every band of a capture),
   /// as under passing clouds; 0 keeps it steady. The MicaSense light sensor records it.
   double light_variation = 0.0;
+  /// The MicaSense light sensor reads (1 + this) x the sunlight (a calibration or mounting error,
+  /// which a calibration panel takes out); -0.5 .. 1.
+  double dls_bias = 0.0;
+  /// Captures of a calibration panel after the flight's (MicaSense only).
+  int panel_captures = 0;
   bool overwrite = false;
 };
 
@@ -83,6 +94,7 @@ struct RawSummary {
   std::filesystem::path out;
   std::string camera;
   int captures = 0;
+  int panel_captures = 0;
   int files = 0;
   int ms_width = 0, ms_height = 0, rgb_width = 0, rgb_height = 0;
   double min_exposure_s = 0, max_exposure_s = 0;
@@ -159,6 +171,10 @@ inline RawExposure raw_exposure(std::uint64_t seed, int capture, int band) {
 /// roughly the solar spectrum at the ground from green to near infra-red).
 inline double raw_irradiance(double nm) { return 1.45 - 0.0006 * (nm - 475.0); }
 
+/// The reflectance of the synthetic calibration panel at wavelength `nm` (MicaSense's panels are
+/// about 0.49 to 0.53 from blue to near infra-red).
+inline double raw_panel_albedo(double nm) { return 0.49 + 0.04 * (nm - 475.0) / 400.0; }
+
 /// The sunlight of capture `capture` relative to the steady sky: 1 + variation x U(-1, 1).
 inline double raw_light(std::uint64_t seed, int capture, double variation) {
   if (variation == 0.0) return 1.0;
@@ -175,6 +191,36 @@ inline Image<float> render_radiance(const SynthScene& s, const Camera<float>& ca
 #pragma omp parallel for schedule(dynamic, 1)
   for (int y = 0; y < cam.height; ++y)
     for (int x = 0; x < cam.width; ++x) img.at(x, y, 0) = pixel_spectrum(s, cam, x, y, rs)[static_cast<std::size_t>(channel)];
+  return img;
+}
+
+/// A panel picture's corners: a square of side `side` x height centred `dx`, `dy` off the image
+/// centre (in units of the height), turned by 12 degrees; corners in the camera's order.
+inline std::array<std::array<double, 2>, 4> panel_square(int width, int height, double side, double dx, double dy) {
+  const double c = std::cos(0.2094395102393195), sn = std::sin(0.2094395102393195), h = 0.5 * side * height;
+  const double cx = 0.5 * width + dx * height, cy = 0.5 * height + dy * height;
+  std::array<std::array<double, 2>, 4> q{};
+  const double u[4] = {1, -1, -1, 1}, v[4] = {-1, -1, 1, 1};  // upper right, upper left, lower left, lower right
+  for (int i = 0; i < 4; ++i) q[i] = {cx + h * (u[i] * c - v[i] * sn), cy + h * (u[i] * sn + v[i] * c)};
+  return q;
+}
+
+/// The scene's values of a panel picture: `albedo` inside the panel square `q`, a darker
+/// background outside (0.08 at the top to 0.12 at the bottom).
+inline Image<float> panel_radiance(int width, int height, const std::array<std::array<double, 2>, 4>& q, double albedo) {
+  Image<float> img(width, height, 1);
+  for (int y = 0; y < height; ++y)
+    for (int x = 0; x < width; ++x) {
+      bool pos = false, neg = false;
+      for (int i = 0; i < 4; ++i) {
+        const auto& a = q[std::size_t(i)];
+        const auto& b = q[std::size_t((i + 1) % 4)];
+        const double t = (b[0] - a[0]) * (y - a[1]) - (b[1] - a[1]) * (x - a[0]);
+        pos = pos || t > 0;
+        neg = neg || t < 0;
+      }
+      img.at(x, y, 0) = float(!(pos && neg) ? albedo : 0.08 + 0.04 * y / std::max(1, height - 1));
+    }
   return img;
 }
 
@@ -299,6 +345,10 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
   if (opt.width != 0 && (opt.width < 16 || opt.width > 8192)) throw std::invalid_argument("width must be 0 (preset) or 16 .. 8192");
   if (!(opt.light_variation >= 0.0 && opt.light_variation <= 0.9))
     throw std::invalid_argument("the light variation must be 0 .. 0.9");
+  if (!(opt.dls_bias >= -0.5 && opt.dls_bias <= 1.0)) throw std::invalid_argument("the light sensor's bias must be -0.5 .. 1");
+  if (opt.panel_captures < 0 || opt.panel_captures > 100) throw std::invalid_argument("panel captures must be 0 .. 100");
+  if (opt.panel_captures > 0 && opt.camera != "micasense")
+    throw std::invalid_argument("panel captures are written for the micasense camera only");
   if (opt.captures > 0) preset.captures = opt.captures;
   if (opt.width > 0) {
     preset.ms_width = opt.width;
@@ -325,6 +375,7 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
   sum.rgb_height = preset.rgb_height;
   sum.min_exposure_s = 1e9;
   sum.min_iso = 1 << 30;
+  sum.panel_captures = opt.panel_captures;
   const bool black = opt.camera != "sequoia", sequoia = opt.camera == "sequoia", micasense = opt.camera == "micasense";
   // MicaSense's row gradient: a RedEdge's a2 and a3 (for its 960 rows), scaled to this height so
   // that the last row gains what the camera's does (6-26% at these exposures).
@@ -334,8 +385,9 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
   const std::vector<double> c2d = {0.7, 0.6, 0.6, -0.6, -0.6};
   const std::vector<std::array<int, 2>> e2d = {{0, 0}, {1, 0}, {0, 1}, {2, 0}, {0, 2}};
   const double black_level = opt.camera == "dji" ? 3200.0 : 4800.0;
-  for (int ci = 0; ci < sum.captures; ++ci) {
-    const Capture& cap = scene.captures[static_cast<std::size_t>(ci)];
+  for (int ci = 0; ci < sum.captures + opt.panel_captures; ++ci) {
+    const bool panel = ci >= sum.captures;  // a calibration panel's capture, on the ground by the first
+    const Capture& cap = scene.captures[static_cast<std::size_t>(panel ? 0 : ci)];
     for (std::size_t bi = 0; bi < bands.size(); ++bi) {
       const RawBand& b = bands[bi];
       Camera<float> cam = cap.cameras[static_cast<std::size_t>(b.mount)];
@@ -366,7 +418,11 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
         ++sum.files;
         continue;
       }
-      const RawExposure e = raw_exposure(opt.seed, ci, int(bi));
+      RawExposure e = raw_exposure(opt.seed, ci, int(bi));
+      if (panel) {  // auto-exposed for the bright panel: 4 times shorter, ISO 100
+        e.exposure_s = 1.0 / std::round(4.0 / e.exposure_s);
+        e.iso = 100;
+      }
       const double light = raw_light(opt.seed, ci, opt.light_variation);
       sum.min_exposure_s = std::min(sum.min_exposure_s, e.exposure_s);
       sum.max_exposure_s = std::max(sum.max_exposure_s, e.exposure_s);
@@ -380,7 +436,12 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
       const std::vector<double> k = opt.camera == "dji"
                                         ? std::vector<double>{0, 0.30 / (rmax * rmax), 0, 0.07 / std::pow(rmax, 4), 0, 0}
                                         : std::vector<double>{0, -0.30 / (rmax * rmax), 0, 0.02 / std::pow(rmax, 4), 0, 0};
-      const Image<float> L = detail::render_radiance(scene, cam, b.spectrum_channel, rs);
+      // The panel as this lens sees it: a little off-centre, differently per band.
+      const double pdx = 0.03 * (double(bi) - 2.0), pdy = 0.02 * (double(bi % 2) - 0.5);
+      const Image<float> L =
+          panel ? detail::panel_radiance(cam.width, cam.height, detail::panel_square(cam.width, cam.height, 0.36, pdx, pdy),
+                                         raw_panel_albedo(b.wavelength_nm))
+                : detail::render_radiance(scene, cam, b.spectrum_channel, rs);
       std::vector<std::uint16_t> dn(L.data.size());
       const double bl = black ? black_level : 0.0;
       for (int y = 0; y < cam.height; ++y)
@@ -423,8 +484,17 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
           const double e_ref = raw_irradiance(b.wavelength_nm);
           const double a1 = 65536.0 * e_ref / (std::numbers::pi * b.sensitivity);
           elems.emplace_back("MicaSense:RadiometricCalibration", detail::rdf_seq({a1, row_a2, row_a3}));
-          attrs.emplace_back("Camera:HorizontalIrradiance", detail::g10(e_ref * light / 0.01));
+          attrs.emplace_back("Camera:HorizontalIrradiance", detail::g10(e_ref * light * (1.0 + opt.dls_bias) / 0.01));
           attrs.emplace_back("Camera:IrradianceScaleToSIUnits", "0.01");
+          if (panel) {  // the inner area of the panel, as the camera marks it: whole pixels
+            std::string area;
+            for (const auto& c : detail::panel_square(cam.width, cam.height, 0.22, pdx, pdy))
+              area += io::cat(area.empty() ? "" : ",", std::lround(c[0]), ",", std::lround(c[1]));
+            attrs.emplace_back("Camera:CalibrationPicture", "2");
+            attrs.emplace_back("Camera:Albedo", detail::g10(raw_panel_albedo(b.wavelength_nm)));
+            attrs.emplace_back("Camera:ReflectArea", area);
+            attrs.emplace_back("Camera:PanelSerial", "RP04-1234567-OB");
+          }
         }
       }
       if (sequoia) {
