@@ -60,6 +60,7 @@
 #include <string_view>
 #include <vector>
 
+#include "../io/calibration_panel.hpp"
 #include "../io/error.hpp"
 #include "../io/file.hpp"
 #include "../io/image_io.hpp"
@@ -196,10 +197,10 @@ inline Image<float> render_radiance(const SynthScene& s, const Camera<float>& ca
 
 /// A panel picture's corners: a square of side `side` x height centred `dx`, `dy` off the image
 /// centre (in units of the height), turned by 12 degrees; corners in the camera's order.
-inline std::array<std::array<double, 2>, 4> panel_square(int width, int height, double side, double dx, double dy) {
+inline io::PanelArea panel_square(int width, int height, double side, double dx, double dy) {
   const double c = std::cos(0.2094395102393195), sn = std::sin(0.2094395102393195), h = 0.5 * side * height;
   const double cx = 0.5 * width + dx * height, cy = 0.5 * height + dy * height;
-  std::array<std::array<double, 2>, 4> q{};
+  io::PanelArea q{};
   const double u[4] = {1, -1, -1, 1}, v[4] = {-1, -1, 1, 1};  // upper right, upper left, lower left, lower right
   for (int i = 0; i < 4; ++i) q[i] = {cx + h * (u[i] * c - v[i] * sn), cy + h * (u[i] * sn + v[i] * c)};
   return q;
@@ -207,19 +208,11 @@ inline std::array<std::array<double, 2>, 4> panel_square(int width, int height, 
 
 /// The scene's values of a panel picture: `albedo` inside the panel square `q`, a darker
 /// background outside (0.08 at the top to 0.12 at the bottom).
-inline Image<float> panel_radiance(int width, int height, const std::array<std::array<double, 2>, 4>& q, double albedo) {
+inline Image<float> panel_radiance(int width, int height, const io::PanelArea& q, double albedo) {
   Image<float> img(width, height, 1);
   for (int y = 0; y < height; ++y)
     for (int x = 0; x < width; ++x) {
-      bool pos = false, neg = false;
-      for (int i = 0; i < 4; ++i) {
-        const auto& a = q[std::size_t(i)];
-        const auto& b = q[std::size_t((i + 1) % 4)];
-        const double t = (b[0] - a[0]) * (y - a[1]) - (b[1] - a[1]) * (x - a[0]);
-        pos = pos || t > 0;
-        neg = neg || t < 0;
-      }
-      img.at(x, y, 0) = float(!(pos && neg) ? albedo : 0.08 + 0.04 * y / std::max(1, height - 1));
+      img.at(x, y, 0) = float(io::inside_quad(q, x, y) ? albedo : 0.08 + 0.04 * y / std::max(1, height - 1));
     }
   return img;
 }
