@@ -32,6 +32,7 @@
 #include <msgs/io/image_io.hpp>
 #include <msgs/io/match_pairs.hpp>
 #include <msgs/io/model_alignment.hpp>
+#include <msgs/io/panel_list.hpp>
 #include <msgs/io/ply.hpp>
 #include <msgs/io/radiometry.hpp>
 #include <msgs/io/rig_poses.hpp>
@@ -50,6 +51,7 @@ constexpr const char* kUsage =
     "usage: msgs import --images DIR --out DIR [--camera auto|micasense|dji|sequoia]\n"
     "                   [--bands PATTERN=ID,...] [--eval-every N] [--camera-model M]\n"
     "                   [--radiometry auto|none|reflectance|panel|panel+dls] [--panel-albedo A]\n"
+    "                   [--panels FILE]\n"
     "                   [--matching exhaustive|window|gps]\n"
     "                   [--window N] [--neighbours K] [--sift-threshold T] [--ba-tolerance X]\n"
     "                   [--merge-models on|off] [--rig on|off] [--allow-partial] [--force]\n"
@@ -116,6 +118,14 @@ constexpr const char* kUsage =
     "  --panel-albedo A    the panel's reflectance, for every band (0.49) or per band\n"
     "                      (MS_G=0.49,MS_R=0.5,...): where Camera:Albedo is missing, or to\n"
     "                      override it with the panel's calibration sheet\n"
+    "  --panels FILE       the panel pictures of a camera that does not mark them (DJI, Parrot,\n"
+    "                      or a MicaSense that could not read the panel), as JSON:\n"
+    "                        {\"albedo\": 0.49, \"pictures\": [{\"file\": \"DJI_0021_MS_G.TIF\",\n"
+    "                          \"area\": [[412, 300], [380, 301], [381, 333], [413, 332]]}, ...]}\n"
+    "                      file relative to --images; area the corners of the panel's reflecting\n"
+    "                      part in that image, x and y in pixels, in order around it; albedo per\n"
+    "                      picture or for all (else Camera:Albedo or --panel-albedo). Their\n"
+    "                      captures are set aside; each listed picture calibrates its band\n"
     "  --matching M        image pairs COLMAP matches: exhaustive (default: every pair; the time\n"
     "                      grows with the square of the image count), window (the bands of a\n"
     "                      capture with each other, and each band with the same band of the next\n"
@@ -283,11 +293,13 @@ std::vector<std::size_t> usable_panels(const std::vector<Item>& panels, const st
   }
   if (use.empty())
     fail(images, cat("--radiometry ", radiometry, " needs a picture of the calibration panel in band ", band,
-                     " that the camera read (Xmp.Camera.CalibrationPicture 2, the panel's area in Xmp.Camera.ReflectArea); ",
+                     " that the camera read (Xmp.Camera.CalibrationPicture 2, the panel's area in Xmp.Camera.ReflectArea)",
+                     " or that --panels lists; ",
                      !why.empty()      ? "these are not: " + list_some(why, 3)
                      : panels.empty() ? std::string("no capture in --images is marked as one")
                                       : std::string("no panel capture holds this band"),
-                     "\n  msgs does not search images for a panel; use --radiometry reflectance (the DLS 2 alone) or",
+                     "\n  msgs does not search images for a panel: list the panel pictures and their areas with",
+                     " --panels FILE (see msgs import --help), or use --radiometry reflectance (the DLS 2 alone) or",
                      " auto (relative radiance)"));
   return use;
 }
@@ -725,7 +737,7 @@ MergeResult merge_rest_models(const std::vector<Item>& items, std::size_t captur
 
 int run_import(const std::vector<std::string>& argv) {
   const msgs::cli::Args args(argv,
-                             {"images", "out", "camera", "bands", "eval-every", "camera-model", "radiometry", "panel-albedo", "matching",
+                             {"images", "out", "camera", "bands", "eval-every", "camera-model", "radiometry", "panel-albedo", "panels", "matching",
                               "window", "neighbours", "sift-threshold", "ba-tolerance", "merge-models", "rig", "colmap", "exiv2"},
                              {"force", "allow-partial", "keep-work", "help"});
   if (args.flag("help")) {
@@ -770,6 +782,7 @@ int run_import(const std::vector<std::string>& argv) {
   const std::map<std::string, double> panel_albedo = parse_panel_albedo(args.get("panel-albedo", ""));
   if (!panel_albedo.empty() && !by_panel)
     throw msgs::cli::UsageError("--panel-albedo goes with --radiometry panel or panel+dls");
+  if (args.has("panels") && !by_panel) throw msgs::cli::UsageError("--panels goes with --radiometry panel or panel+dls");
   const std::string matching = args.get("matching", "exhaustive");
   if (matching != "exhaustive" && matching != "window" && matching != "gps")
     throw msgs::cli::UsageError("--matching expects exhaustive, window or gps, got '" + matching + "'");
@@ -791,6 +804,9 @@ int run_import(const std::vector<std::string>& argv) {
 
   std::error_code ec;
   if (!fs::is_directory(images, ec)) fail(images, "--images folder does not exist or is not a folder");
+  const fs::path panels_file = args.has("panels") ? fs::absolute(args.get("panels")) : fs::path();
+  const std::vector<msgs::io::PanelPicture> panel_list =
+      args.has("panels") ? msgs::io::read_panel_list(panels_file) : std::vector<msgs::io::PanelPicture>{};
   if (fs::exists(out, ec) && !args.flag("force"))
     fail(out, "output folder already exists (choose another --out, or replace it with --force)");
   if (out == images || images.lexically_relative(out).string().rfind("..", 0) != 0)
@@ -916,6 +932,23 @@ int run_import(const std::vector<std::string>& argv) {
   std::vector<Item> panels;  // their `capture` indexes panel_keys
   std::vector<std::string> panel_keys;
   {
+    // The pictures listed in --panels count as marked by the camera, with the list's area and albedo.
+    for (std::size_t i = 0; i < panel_list.size(); ++i) {
+      const msgs::io::PanelPicture& p = panel_list[i];
+      const auto it = std::find_if(items.begin(), items.end(), [&](const Item& x) { return x.source == p.file; });
+      if (it == items.end() || it->band == "D")
+        fail(panels_file, cat("pictures[", i, "].file"),
+             cat("'", p.file.generic_string(), "' is not ",
+                 it == items.end() ? "one of the band images found in --images (a typo, or a file the names scheme skipped)"
+                                   : "a multispectral band's image (the RGB camera's are not calibrated)"));
+      it->meta.calibration_picture = 2;
+      it->meta.panel_area = p.area;
+      it->meta.source["panel_area"] = "--panels";
+      if (p.albedo) {
+        it->meta.panel_albedo = *p.albedo;
+        it->meta.source["panel_albedo"] = "--panels";
+      }
+    }
     std::set<std::size_t> marked;
     for (const Item& it : items)
       if (it.meta.calibration_picture != 0) marked.insert(it.capture);
@@ -939,8 +972,9 @@ int run_import(const std::vector<std::string>& argv) {
       scan.captures = std::move(flight);
       items = scan_items(scan);
       for (Item& it : items) it.meta = std::move(meta_of.at(it.source));
-      std::printf("  %zu capture%s of a calibration panel set aside (Xmp.Camera.CalibrationPicture): %s%s\n",
-                  panel_keys.size(), panel_keys.size() == 1 ? "" : "s", list_some(panel_keys).c_str(),
+      std::printf("  %zu capture%s of a calibration panel set aside (Xmp.Camera.CalibrationPicture%s): %s%s\n",
+                  panel_keys.size(), panel_keys.size() == 1 ? "" : "s", panel_list.empty() ? "" : ", --panels",
+                  list_some(panel_keys).c_str(),
                   by_panel ? "" : " (--radiometry panel calibrates with them)");
     }
   }

@@ -40,9 +40,10 @@ constexpr const char* kUsage =
     "               as under passing clouds (`msgs import --radiometry reflectance` divides it out)\n"
     "  --dls-bias B the MicaSense light sensor reads (1 + B) x the sunlight (-0.5 to 1; default 0): a\n"
     "               sensor error that `msgs import --radiometry panel+dls` takes out with the panel\n"
-    "  --panel-captures N  MicaSense only: N captures of a calibration panel after the flight's\n"
-    "               (default 0), marked as the camera marks them (CalibrationPicture, Albedo,\n"
-    "               ReflectArea), for `msgs import --radiometry panel`\n";
+    "  --panel-captures N  N captures of a calibration panel after the flight's (default 0), for\n"
+    "               `msgs import --radiometry panel`: MicaSense files are marked as the camera marks\n"
+    "               them (CalibrationPicture, Albedo, ReflectArea); for DJI and Sequoia sets, which\n"
+    "               carry no such tags, DIR/panels.json lists them for `msgs import --panels`\n";
 
 int run_raw(const msgs::cli::Args& args) {
   msgs::synth::RawOptions opt;
@@ -68,7 +69,11 @@ int run_raw(const msgs::cli::Args& args) {
   std::printf("synthetic raw %s captures (preset %s, seed %llu) written to %s\n", s.camera.c_str(), opt.preset.c_str(),
               static_cast<unsigned long long>(opt.seed), s.out.string().c_str());
   std::printf("  captures: %d%s, files: %d\n", s.captures,
-              s.panel_captures ? msgs::io::cat(" and ", s.panel_captures, " of a calibration panel").c_str() : "", s.files);
+              s.panel_captures ? msgs::io::cat(" and ", s.panel_captures, " of a calibration panel",
+                                               s.camera == "micasense" ? "" : " (listed in panels.json)")
+                                     .c_str()
+                               : "",
+              s.files);
   std::printf("  multispectral %d x %d (16-bit TIFF)", s.ms_width, s.ms_height);
   if (s.camera != "micasense") std::printf(", RGB %d x %d (JPEG)", s.rgb_width, s.rgb_height);
   std::printf("\n  exposure 1/%.0f .. 1/%.0f s, ISO %d .. %d\n", 1.0 / s.min_exposure_s, 1.0 / s.max_exposure_s, s.min_iso,

@@ -1,7 +1,8 @@
 // fuzz/fuzz_import_meta.cpp
 // libFuzzer target for the pure parts of `msgs import`: exiv2 output parsing
 // (io::parse_capture_meta with GPS positions and the pairs formed from them, a calibration panel's
-// area read from a small picture, io::split_exiv2_output), --bands pattern parsing and file-name
+// area read from a small picture, io::split_exiv2_output), the --panels list (io::parse_panel_list,
+// fed the same text), --bands pattern parsing and file-name
 // recognition (io::parse_band_patterns, io::scan_capture_names with every camera scheme).
 //
 // Input: exiv2 text, then optionally a NUL byte, a --bands spec line and file names one per line.
@@ -23,6 +24,7 @@
 #include "msgs/io/capture_meta.hpp"
 #include "msgs/io/capture_names.hpp"
 #include "msgs/io/match_pairs.hpp"
+#include "msgs/io/panel_list.hpp"
 #include "msgs/io/radiometry.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
@@ -78,6 +80,13 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       const std::vector<io::PairImage> images = {{0, "D"}, {1, "D"}};
       (void)io::neighbour_pairs(images, {local, io::local_metres(*m.gps, 1.0, 1.0)}, 1);
     }
+  });
+  fuzz::expect_io_error_only("parse_panel_list", [&] {
+    for (const io::PanelPicture& p : io::parse_panel_list(text, "panels.json"))
+      if (!io::convex_quad(p.area) || (p.albedo && !(*p.albedo > 0 && *p.albedo <= 1)) || p.file.is_absolute()) {
+        std::fprintf(stderr, "parse_panel_list: a picture that should have been refused\n");
+        std::abort();
+      }
   });
   std::vector<std::string> names(lines.begin() + (lines.empty() ? 0 : 1), lines.end());
   fuzz::expect_io_error_only("split_exiv2_output", [&] {

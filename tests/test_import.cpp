@@ -98,14 +98,22 @@ msgs::synth::SynthPreset raw_set_preset(const msgs::synth::RawOptions& opt) {
   return p;
 }
 
-/// The radiance the scene rendered into MicaSense file `src` (IMG_000N_B.tif) of a raw set of `opt`
-/// (scene from make_scene(raw_set_preset(opt), opt.seed)): the truth its normalised image is
-/// compared with.
-msgs::Image<float> micasense_truth(const msgs::synth::SynthScene& scene, const msgs::synth::RawOptions& opt,
-                                   const std::string& src) {
-  const auto bands = msgs::synth::raw_bands("micasense");
-  const int capture = std::stoi(src.substr(4, 4)) - 1;
-  const std::size_t bi = std::size_t(src[9] - '1');
+/// The radiance the scene rendered into multispectral file `src` of a flight capture of a raw set
+/// of `opt` (scene from make_scene(raw_set_preset(opt), opt.seed)): the truth its normalised image
+/// is compared with.
+msgs::Image<float> raw_truth(const msgs::synth::SynthScene& scene, const msgs::synth::RawOptions& opt,
+                             const std::string& src) {
+  const auto bands = msgs::synth::raw_bands(opt.camera);
+  int capture = -1;
+  std::size_t bi = 0;
+  for (int c = 0; c < int(scene.captures.size()) && capture < 0; ++c)
+    for (std::size_t b = 0; b < bands.size(); ++b)
+      if (!bands[b].rgb && msgs::synth::raw_file_name(opt.camera, bands[b], c) == src) {
+        capture = c;
+        bi = b;
+      }
+  REQUIRE_MESSAGE(capture >= 0, src << " is no multispectral file of a flight capture");
+  REQUIRE(bands[bi].mount != msgs::synth::Band::D);  // (MicaSense's blue, which msgs does not import)
   const msgs::Camera<float> cam = scene.captures[std::size_t(capture)].cameras[std::size_t(bands[bi].mount)];
   msgs::synth::RenderSettings rs;
   rs.aa = raw_set_preset(opt).aa;
@@ -179,7 +187,7 @@ double median(std::vector<double> v) {
 double median_ratio_to_truth(const fs::path& dir, const fs::path& ds, const Json& f, const msgs::synth::SynthScene& scene,
                              const msgs::synth::RawOptions& opt) {
   const std::string src = f["source"];
-  const auto truth = micasense_truth(scene, opt, src);
+  const auto truth = raw_truth(scene, opt, src);
   const auto norm = msgs::io::read_image(ds / f["file_path"].get<std::string>());
   const auto raw = msgs::io::read_image(dir / "raw" / src);
   std::vector<double> ratio;
@@ -424,7 +432,7 @@ TEST_CASE("msgs import: synthetic MicaSense captures through exiv2 + COLMAP") {
     const std::string src = f["source"];  // IMG_000N_B.tif
     const auto e = msgs::synth::raw_exposure(opt.seed, std::stoi(src.substr(4, 4)) - 1, src[9] - '1');
     CHECK(rad["exposure_s"].get<double>() == doctest::Approx(e.exposure_s));
-    const auto truth = micasense_truth(scene, opt, src);
+    const auto truth = raw_truth(scene, opt, src);
     const auto norm = msgs::io::read_image(dir / "ds" / f["file_path"].get<std::string>());
     const auto raw = msgs::io::read_image(dir / "raw" / src);
     std::vector<double> rn, rr, rn_top, rn_bottom;
@@ -581,6 +589,64 @@ TEST_CASE("msgs import --radiometry panel, panel+dls: the panel capture is set a
   CHECK(usage.first == 2);
   CHECK_MESSAGE(usage.second.find("--panel-albedo goes with --radiometry panel or panel+dls") != std::string::npos,
                 usage.second);
+}
+
+TEST_CASE("msgs import --panels: a DJI flight's panel pictures, listed by hand, calibrate it") {
+  // A Mavic 3M marks no panel pictures and msgs reads no DJI light sensor: the panel capture after
+  // the flight (0007), listed with its areas in panels.json, is the reflectance's only reference.
+  msgs::synth::RawOptions opt = small_micasense_set();
+  opt.camera = "dji";
+  opt.captures = 6;
+  opt.panel_captures = 1;
+  const auto dir_or = colmap_case("panels", "calibration panels listed by hand", opt);
+  if (!dir_or) return;
+  const fs::path& dir = *dir_or;
+  const std::string list = "--radiometry panel --panels '" + (dir / "raw" / "panels.json").string() + "'";
+  const auto ok = import_ok(dir, "ds", list);
+  REQUIRE_MESSAGE(ok.first == 0, ok.second);
+  CHECK_MESSAGE(ok.second.find("1 capture of a calibration panel set aside (Xmp.Camera.CalibrationPicture, --panels): 0007") !=
+                    std::string::npos,
+                ok.second);
+  const Json tf = Json::parse(slurp(dir / "ds" / "transforms.json"));
+  REQUIRE(tf["frames"].size() == 30);
+  CHECK(tf["msgs_import"]["captures"] == 6);
+  const auto& panels = tf["msgs_import"]["calibration_panels"];
+  REQUIRE(panels.size() == 4);
+  for (const auto& p : panels) {
+    CHECK(p["albedo_from"] == "--panels");
+    CHECK(!p.contains("irradiance_w_m2_nm"));  // no radiance calibration in DJI files
+  }
+  const msgs::synth::SynthScene scene = msgs::synth::make_scene(raw_set_preset(opt), opt.seed);
+  int checked = 0;
+  for (const auto& f : tf["frames"]) {
+    if (f["mm_channel"] == "D") continue;
+    ++checked;
+    CHECK(f["radiometry"]["formula"].get<std::string>().rfind("reflectance", 0) == 0);
+    CHECK_MESSAGE(median_ratio_to_truth(dir, dir / "ds", f, scene, opt) == doctest::Approx(1.0).epsilon(0.01),
+                  f["source"].get<std::string>());
+  }
+  CHECK(checked == 24);
+
+  // A list naming a file that is not there, and one whose area is no area: refused before COLMAP.
+  const auto refused = [&](const std::string& json, const std::string& out) {
+    msgs::io::write_text_atomic(dir / (out + ".json"), json);
+    return import_raw(dir, out, "--radiometry panel --panels '" + (dir / (out + ".json")).string() + "'");
+  };
+  const auto typo = refused(R"({"pictures": [{"file": "DJI_0007_MS_G.TIF", "area": [[1, 1], [9, 1], [9, 9], [1, 9]]}]})",
+                            "typo");
+  CHECK(typo.first == 1);
+  CHECK_MESSAGE(typo.second.find("typo.json: field 'pictures[0].file': 'DJI_0007_MS_G.TIF' is not one of the band images") !=
+                    std::string::npos,
+                typo.second);
+  const auto bow = refused(R"({"pictures": [{"file": "x.TIF", "area": [[1, 1], [9, 9], [9, 1], [1, 9]]}]})", "bow");
+  CHECK(bow.first == 1);
+  CHECK_MESSAGE(bow.second.find("field 'pictures[0].area': the four corners do not go once around a convex area") !=
+                    std::string::npos,
+                bow.second);
+  for (const char* out : {"typo", "bow"}) {
+    CHECK(!fs::exists(dir / out));
+    CHECK(!leftovers(dir, out));
+  }
 }
 
 TEST_CASE("msgs import --matching window and gps: the pairs of nearby captures register the whole set") {

@@ -1,13 +1,15 @@
 // tests/test_radiometry.cpp
 // Tests for include/msgs/io/capture_meta.hpp (exiv2 output -> metadata),
 // include/msgs/io/radiometry.hpp (DN -> relative radiance or reflectance) and
-// include/msgs/io/calibration_panel.hpp (a panel picture -> the band's irradiance): known values,
+// include/msgs/io/calibration_panel.hpp (a panel picture -> the band's irradiance) and
+// include/msgs/io/panel_list.hpp (the panel pictures a user lists): known values,
 // vignetting conventions, band planning with missing tags, and clear errors for malformed text
 // and unusable panel pictures instead of crashes.
 #include <doctest/doctest.h>
 
 #include <msgs/io/calibration_panel.hpp>
 #include <msgs/io/capture_meta.hpp>
+#include <msgs/io/panel_list.hpp>
 #include <msgs/io/radiometry.hpp>
 
 #include <array>
@@ -397,6 +399,50 @@ TEST_CASE("calibration panel: tags, the area's pixels, the band's irradiance, an
   CaptureMeta no_black = m;
   no_black.black_level.reset();
   CHECK(plan_band({m, no_black}, {"a.tif", "b.tif"}, Calibration::panel).missing.count("black level") == 1);
+}
+
+TEST_CASE("panel list: pictures, areas and albedos as --panels reads them; malformed lists name the field") {
+  const auto list = parse_panel_list(R"({"albedo": 0.49, "pictures": [
+      {"file": "sub/./DJI_0007_MS_G.TIF", "area": [[60, 40], [40, 40], [40, 60], [60, 60]]},
+      {"file": "DJI_0007_MS_R.TIF", "area": [[60.5, 40], [40, 40], [40, 60], [60, 60]], "albedo": 0.51}]})",
+                                     "panels.json");
+  REQUIRE(list.size() == 2);
+  CHECK(list[0].file.generic_string() == "sub/DJI_0007_MS_G.TIF");
+  CHECK(list[0].area[2] == std::array<double, 2>{40, 60});
+  CHECK(*list[0].albedo == 0.49);
+  CHECK(*list[1].albedo == 0.51);
+  CHECK(list[1].area[0][0] == 60.5);
+  CHECK(!parse_panel_list(R"({"pictures": [{"file": "a.tif", "area": [[0, 0], [9, 0], [9, 9], [0, 9]]}]})", "p.json")[0].albedo);
+
+  const std::string good = R"("area": [[0, 0], [9, 0], [9, 9], [0, 9]])";
+  const std::vector<std::pair<std::string, std::string>> bad = {
+      {"{", "p.json: invalid JSON"},
+      {"[]", "field 'pictures'"},
+      {R"({"pictures": []})", "field 'pictures'"},
+      {R"({"pictures": [7]})", "field 'pictures[0]'"},
+      {R"({"pictures": [{"area": [[0, 0], [9, 0], [9, 9], [0, 9]]}]})", "field 'pictures[0].file'"},
+      {R"({"pictures": [{"file": "/abs/a.tif", )" + good + "}]}", "is not a path inside --images"},
+      {R"({"pictures": [{"file": "../a.tif", )" + good + "}]}", "is not a path inside --images"},
+      {R"({"pictures": [{"file": "a.tif", )" + good + R"(}, {"file": "./a.tif", )" + good + "}]}", "is listed twice"},
+      {R"({"pictures": [{"file": "a.tif", "area": [[0, 0], [9, 0], [9, 9]]}]})", "field 'pictures[0].area'"},
+      {R"({"pictures": [{"file": "a.tif", "area": [[0, 0], [9, 0], [9, 9], [0, "9"]]}]})", "field 'pictures[0].area'"},
+      {R"({"pictures": [{"file": "a.tif", "area": [[0, 0], [9, 9], [9, 0], [0, 9]]}]})", "convex"},
+      {R"({"pictures": [{"file": "a.tif", )" + good + R"(, "albedo": 0}]})", "field 'pictures[0].albedo'"},
+      {R"({"albedo": 1.2, "pictures": [{"file": "a.tif", )" + good + "}]}", "field 'albedo'"},
+  };
+  for (const auto& [text, message] : bad) {
+    CAPTURE(text);
+    CHECK_THROWS_WITH_AS(parse_panel_list(text, "p.json"), doctest::Contains(message.c_str()), IoError);
+  }
+
+  // A camera that writes no black level at all (the Sequoia) can be calibrated by a panel; one
+  // whose images disagree cannot.
+  CaptureMeta no_black = parse_capture_meta(kMicaSense, "a.tif");
+  no_black.black_level.reset();
+  const BandPlan p = plan_band({no_black, no_black}, {"a.tif", "b.tif"}, Calibration::panel);
+  CHECK(p.missing.empty());
+  CHECK(!p.steps.black_level);
+  CHECK(plan_band({no_black}, {"a.tif"}, Calibration::sun_sensor).missing.count("black level") == 1);
 }
 
 TEST_CASE("radiometry: a vignetting model that brightens the image's edge is an error") {

@@ -86,8 +86,9 @@ struct BandPlan {
 /// Decide which steps a band gets: a step is applied when every image of the band has its tags
 /// (black level; exposure time; gain or ISO; vignetting polynomial and centre). Reflectance needs
 /// every step (MicaSense's row gradient wherever the camera writes it, always for the light
-/// sensor's), MicaSense's a1 for the light sensor's, and the irradiance in every image where the
-/// light sensor takes part: `missing` then lists what the caller must refuse.
+/// sensor's; a panel's calibration takes a camera that writes no black level at all), MicaSense's
+/// a1 for the light sensor's, and the irradiance in every image where the light sensor takes part:
+/// `missing` then lists what the caller must refuse.
 inline BandPlan plan_band(const std::vector<CaptureMeta>& metas, const std::vector<std::filesystem::path>& files,
                           Calibration calibration = Calibration::relative) {
   BandPlan plan;
@@ -99,7 +100,11 @@ inline BandPlan plan_band(const std::vector<CaptureMeta>& metas, const std::vect
     return plan.missing.count(tag) == 0 && !metas.empty();
   };
   const bool sun = calibration == Calibration::sun_sensor || calibration == Calibration::panel_and_sun_sensor;
-  plan.steps.black_level = check("black level", [](const CaptureMeta& m) { return m.black_level.has_value(); });
+  const bool panel = calibration == Calibration::panel || calibration == Calibration::panel_and_sun_sensor;
+  // A camera that writes no black level anywhere (the Parrot Sequoia) has none to subtract, which
+  // a panel calibration can live with.
+  if (!panel || std::any_of(metas.begin(), metas.end(), [](const CaptureMeta& m) { return m.black_level.has_value(); }))
+    plan.steps.black_level = check("black level", [](const CaptureMeta& m) { return m.black_level.has_value(); });
   plan.steps.exposure = check("exposure time", [](const CaptureMeta& m) { return m.exposure_s.has_value(); });
   plan.steps.gain = check("gain/ISO", [](const CaptureMeta& m) { return m.gain.has_value(); });
   plan.steps.vignetting = check("vignetting polynomial+centre", [](const CaptureMeta& m) { return m.has_vignetting(); });

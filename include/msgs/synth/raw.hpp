@@ -40,12 +40,15 @@
 // Exposure time and ISO vary per capture and band (an auto-exposing camera), seeded: the same
 // seed gives the same bytes.
 //
-// MicaSense sets can end with captures of a calibration panel (RawOptions::panel_captures), as the
-// camera takes them on the ground: a grey panel of reflectance raw_panel_albedo() on a darker
-// background, seen a little off-centre and turned, with Camera:CalibrationPicture 2, Camera:Albedo,
-// Camera:ReflectArea (the corners of the panel's inner area, whole pixels) and Camera:PanelSerial.
+// A set can end with captures of a calibration panel (RawOptions::panel_captures), as a camera
+// takes them on the ground: a grey panel of reflectance raw_panel_albedo() on a darker background,
+// seen a little off-centre and turned. MicaSense files mark them as the camera does
+// (Camera:CalibrationPicture 2, Camera:Albedo, Camera:ReflectArea: the corners of the panel's inner
+// area, whole pixels, and Camera:PanelSerial); for the other cameras, which do not, the set holds
+// panels.json, the list `msgs import --panels` reads (msgs/io/panel_list.hpp) with the same areas.
 #pragma once
 
+#include <nlohmann/json.hpp>
 #include <stb/stb_image_write.h>
 
 #include <array>
@@ -85,7 +88,7 @@ struct RawOptions {
   /// The MicaSense light sensor reads (1 + this) x the sunlight (a calibration or mounting error,
   /// which a calibration panel takes out); -0.5 .. 1.
   double dls_bias = 0.0;
-  /// Captures of a calibration panel after the flight's (MicaSense only).
+  /// Captures of a calibration panel after the flight's.
   int panel_captures = 0;
   bool overwrite = false;
 };
@@ -204,6 +207,15 @@ inline io::PanelArea panel_square(int width, int height, double side, double dx,
   const double u[4] = {1, -1, -1, 1}, v[4] = {-1, -1, 1, 1};  // upper right, upper left, lower left, lower right
   for (int i = 0; i < 4; ++i) q[i] = {cx + h * (u[i] * c - v[i] * sn), cy + h * (u[i] * sn + v[i] * c)};
   return q;
+}
+
+/// The reflecting area a camera (or a user) marks in a panel picture: the inner square of side 0.22
+/// x height of the panel of side 0.36 x height, corners at whole pixels.
+inline std::array<std::array<long, 2>, 4> panel_area(int width, int height, double dx, double dy) {
+  std::array<std::array<long, 2>, 4> a{};
+  const io::PanelArea q = panel_square(width, height, 0.22, dx, dy);
+  for (std::size_t i = 0; i < 4; ++i) a[i] = {std::lround(q[i][0]), std::lround(q[i][1])};
+  return a;
 }
 
 /// The scene's values of a panel picture: `albedo` inside the panel square `q`, a darker
@@ -340,8 +352,6 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
     throw std::invalid_argument("the light variation must be 0 .. 0.9");
   if (!(opt.dls_bias >= -0.5 && opt.dls_bias <= 1.0)) throw std::invalid_argument("the light sensor's bias must be -0.5 .. 1");
   if (opt.panel_captures < 0 || opt.panel_captures > 100) throw std::invalid_argument("panel captures must be 0 .. 100");
-  if (opt.panel_captures > 0 && opt.camera != "micasense")
-    throw std::invalid_argument("panel captures are written for the micasense camera only");
   if (opt.captures > 0) preset.captures = opt.captures;
   if (opt.width > 0) {
     preset.ms_width = opt.width;
@@ -378,6 +388,7 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
   const std::vector<double> c2d = {0.7, 0.6, 0.6, -0.6, -0.6};
   const std::vector<std::array<int, 2>> e2d = {{0, 0}, {1, 0}, {0, 1}, {2, 0}, {0, 2}};
   const double black_level = opt.camera == "dji" ? 3200.0 : 4800.0;
+  nlohmann::ordered_json panel_list = nlohmann::ordered_json::array();  // panels.json's pictures
   for (int ci = 0; ci < sum.captures + opt.panel_captures; ++ci) {
     const bool panel = ci >= sum.captures;  // a calibration panel's capture, on the ground by the first
     const Capture& cap = scene.captures[static_cast<std::size_t>(panel ? 0 : ci)];
@@ -431,6 +442,13 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
                                         : std::vector<double>{0, -0.30 / (rmax * rmax), 0, 0.02 / std::pow(rmax, 4), 0, 0};
       // The panel as this lens sees it: a little off-centre, differently per band.
       const double pdx = 0.03 * (double(bi) - 2.0), pdy = 0.02 * (double(bi % 2) - 0.5);
+      if (panel && !micasense) {  // listed for --panels, as a user would from the pictures
+        nlohmann::ordered_json pic;
+        pic["file"] = raw_file_name(opt.camera, b, ci);
+        pic["area"] = detail::panel_area(cam.width, cam.height, pdx, pdy);
+        pic["albedo"] = raw_panel_albedo(b.wavelength_nm);
+        panel_list.push_back(pic);
+      }
       const Image<float> L =
           panel ? detail::panel_radiance(cam.width, cam.height, detail::panel_square(cam.width, cam.height, 0.36, pdx, pdy),
                                          raw_panel_albedo(b.wavelength_nm))
@@ -481,8 +499,8 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
           attrs.emplace_back("Camera:IrradianceScaleToSIUnits", "0.01");
           if (panel) {  // the inner area of the panel, as the camera marks it: whole pixels
             std::string area;
-            for (const auto& c : detail::panel_square(cam.width, cam.height, 0.22, pdx, pdy))
-              area += io::cat(area.empty() ? "" : ",", std::lround(c[0]), ",", std::lround(c[1]));
+            for (const auto& c : detail::panel_area(cam.width, cam.height, pdx, pdy))
+              area += io::cat(area.empty() ? "" : ",", c[0], ",", c[1]);
             attrs.emplace_back("Camera:CalibrationPicture", "2");
             attrs.emplace_back("Camera:Albedo", detail::g10(raw_panel_albedo(b.wavelength_nm)));
             attrs.emplace_back("Camera:ReflectArea", area);
@@ -502,6 +520,11 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
       detail::write_raw_tiff(file, cam.width, cam.height, dn, detail::xmp_packet(attrs, elems));
       ++sum.files;
     }
+  }
+  if (!panel_list.empty()) {
+    nlohmann::ordered_json list;
+    list["pictures"] = panel_list;
+    io::write_text_atomic(tmp / "panels.json", list.dump(2) + "\n");
   }
   stage.commit();
   sum.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
