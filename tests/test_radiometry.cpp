@@ -401,6 +401,58 @@ TEST_CASE("calibration panel: tags, the area's pixels, the band's irradiance, an
   CHECK(plan_band({m, no_black}, {"a.tif", "b.tif"}, Calibration::panel).missing.count("black level") == 1);
 }
 
+TEST_CASE("calibration panel: the tags of a real RedEdge-P panel capture, as exiv2 prints them") {
+  // IMG_0001_1.tif (blue) of a RedEdge-P flight of 2024-07-30, read with exiv2 -q -P kv and the
+  // keys of exiv2_metadata_keys(). Measured on its pixels with read_panel: 8470 pixels in the
+  // area, none clipped, an irradiance of 1.005 W/m^2/nm under the panel's albedo of 0.517; the DLS 2
+  // recorded 0.980 facing the sky (Xmp.Camera.Irradiance) and estimated 0.700 on a level surface.
+  const char* text =
+    "Exif.Image.BitsPerSample                      16\n"
+    "Exif.Image.Make                               MicaSense\n"
+    "Exif.Image.Model                              RedEdge-P\n"
+    "Exif.Image.Software                           v1.3.1\n"
+    "Exif.Photo.ExposureTime                       557575/1000000000\n"
+    "Exif.Photo.ISOSpeed                           100\n"
+    "Exif.Photo.FocalLength                        550000000/100000000\n"
+    "Exif.Photo.FocalPlaneXResolution              289855072/1000000\n"
+    "Exif.Photo.FocalPlaneResolutionUnit           4\n"
+    "Exif.GPSInfo.GPSLatitudeRef                   N\n"
+    "Exif.GPSInfo.GPSLatitude                      500000000/10000000 510000000/10000000 463971600/10000000\n"
+    "Exif.GPSInfo.GPSLongitudeRef                  E\n"
+    "Exif.GPSInfo.GPSLongitude                     600000000/100000000 310000000/10000000 537823200/10000000\n"
+    "Exif.GPSInfo.GPSAltitudeRef                   0\n"
+    "Exif.GPSInfo.GPSAltitude                      131277000/1000000\n"
+    "Exif.Image.BlackLevel                         3846 3846 3846 3846\n"
+    "Xmp.Camera.BandName                           Blue\n"
+    "Xmp.Camera.CentralWavelength                  475\n"
+    "Xmp.Camera.VignettingPolynomial2DName         0,0,0,1,0,2,0,3,0,4,0,5,1,0,1,1,1,2,1,3,1,4,2,0,2,1,2,2,2,3,3,0,3,1,3,2,4,0,4,1,5,0\n"
+    "Xmp.Camera.VignettingPolynomial2D             0.505123,0.440381,-0.485391,-0.101444,0.334918,-0.207206,1.438164,-0.699895,0.842299,0.042787,-0.147030,-0.769551,1.374026,-1.246214,0.122442,-1.806520,-0.839078,0.302632,1.974362,0.262407,-0.789175\n"
+    "Xmp.Camera.Albedo                             0.51700000000000002\n"
+    "Xmp.Camera.ReflectArea                        910,765,1003,763,1001,672,908,674\n"
+    "Xmp.Camera.CalibrationPicture                 2\n"
+    "Xmp.MicaSense.RadiometricCalibration          0.00018286520000000001, -2.1597300000000001e-08, 8.6948789999999996e-05\n"
+    "Xmp.MicaSense.PanelSerial                     RP06-2304022-OB\n"
+    "Xmp.DLS.HorizontalIrradiance                  69.95928235648455\n";
+  const CaptureMeta m = parse_capture_meta(text, "IMG_0001_1.tif");
+  CHECK(m.calibration_picture == 2);
+  CHECK(*m.panel_albedo == doctest::Approx(0.517));
+  REQUIRE(m.panel_area.has_value());
+  CHECK(*m.panel_area == PanelArea{{{910, 765}, {1003, 763}, {1001, 672}, {908, 674}}});
+  CHECK(convex_quad(*m.panel_area));
+  CHECK(m.panel_serial == "RP06-2304022-OB");
+  CHECK(*m.irradiance == doctest::Approx(0.6995928));
+  CHECK(m.source.at("irradiance") == "Xmp.DLS.HorizontalIrradiance");
+  CHECK(*m.exposure_s == doctest::Approx(557575e-9));
+  CHECK(*m.radiance_a1 == doctest::Approx(0.0001828652));
+  const BandPlan plan = plan_band({m}, {"IMG_0001_1.tif"}, Calibration::panel_and_sun_sensor);
+  CHECK(plan.missing.empty());
+  CHECK((plan.steps.black_level && plan.steps.exposure && plan.steps.gain && plan.steps.vignetting &&
+         plan.steps.row_gradient && plan.steps.irradiance));
+  const FrameRadiometry r = frame_radiometry(m, plan.steps, 65535, 1456, 1088);
+  CHECK(r.vignetting_poly2d.size() == 21);
+  CHECK_NOTHROW(check_radiometry(r, 1456, 1088, "IMG_0001_1.tif"));
+}
+
 TEST_CASE("panel list: pictures, areas and albedos as --panels reads them; malformed lists name the field") {
   const auto list = parse_panel_list(R"({"albedo": 0.49, "pictures": [
       {"file": "sub/./DJI_0007_MS_G.TIF", "area": [[60, 40], [40, 40], [40, 60], [60, 60]]},

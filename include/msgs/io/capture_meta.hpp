@@ -37,7 +37,8 @@
 //                 image, 1 a picture of a calibration panel the camera could not read, 2 one it read;
 //                 a Sequoia writes 1 and 2 for any panel picture), Xmp.Camera.Albedo (the panel's
 //                 reflectance in this band), Xmp.Camera.ReflectArea (the four corners of the panel's
-//                 reflecting area, x and y in pixels), Xmp.Camera.PanelSerial
+//                 reflecting area, x and y in pixels), Xmp.MicaSense.PanelSerial (a RedEdge-P's
+//                 panel capture has all four) or Xmp.Camera.PanelSerial
 //   focal length  Exif.Photo.FocalLength, Xmp.exif.FocalLength (mm)
 //   focal plane   Exif.Photo.FocalPlaneXResolution / YResolution / ResolutionUnit and the same in
 //                 Xmp.exif (unit 2 inch, the EXIF default, 3 cm, 4 mm, 5 micrometre)
@@ -135,7 +136,7 @@ inline const std::vector<std::string>& exiv2_metadata_keys() {
       "Xmp.Camera.VignettingPolynomial2D", "Xmp.Camera.VignettingPolynomial2DName",
       "Xmp.MicaSense.RadiometricCalibration", "Xmp.Camera.HorizontalIrradiance", "Xmp.DLS.HorizontalIrradiance",
       "Xmp.Camera.IrradianceScaleToSIUnits", "Exif.Image.Model", "Exif.Image.Software", "Xmp.Camera.CalibrationPicture",
-      "Xmp.Camera.Albedo", "Xmp.Camera.ReflectArea", "Xmp.Camera.PanelSerial"};
+      "Xmp.Camera.Albedo", "Xmp.Camera.ReflectArea", "Xmp.MicaSense.PanelSerial", "Xmp.Camera.PanelSerial"};
   return keys;
 }
 
@@ -525,7 +526,8 @@ inline CaptureMeta capture_meta_from_exiv2(const std::map<std::string, std::stri
     m.panel_area = q;
     m.source["panel_area"] = e->first;
   }
-  if (auto e = first({"Xmp.Camera.PanelSerial"})) m.panel_serial = std::string(detail::trim(e->second)).substr(0, 64);
+  if (auto e = first({"Xmp.MicaSense.PanelSerial", "Xmp.Camera.PanelSerial"}))
+    m.panel_serial = std::string(detail::trim(e->second)).substr(0, 64);
   if (auto e = first({"Exif.Photo.FocalLength", "Xmp.exif.FocalLength"})) {
     m.focal_length_mm = number(*e, "a focal length in mm (> 0)", true);
     m.source["focal_length_mm"] = e->first;
