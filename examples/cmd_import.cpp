@@ -929,7 +929,7 @@ int run_import(const std::vector<std::string>& argv) {
   }
 
   // ---- calibration-panel pictures are not part of the scene: set aside, for --radiometry panel
-  std::vector<Item> panels;  // their `capture` indexes panel_keys
+  std::vector<Item> panels;
   std::vector<std::string> panel_keys;
   {
     // The pictures listed in --panels count as marked by the camera, with the list's area and albedo.
@@ -955,15 +955,15 @@ int run_import(const std::vector<std::string>& argv) {
     if (!marked.empty()) {
       for (std::size_t ci : marked) panel_keys.push_back(scan.captures[ci].key);
       if (marked.size() == scan.captures.size())
-        fail(images, cat("every capture is a picture of a calibration panel (Xmp.Camera.CalibrationPicture): ",
-                         list_some(panel_keys), "; add the flight's captures to --images"));
+        fail(images, cat("every capture is a picture of a calibration panel (Xmp.Camera.CalibrationPicture",
+                         panel_list.empty() ? "" : " or --panels", "): ", list_some(panel_keys),
+                         "; add the flight's captures to --images"));
       std::map<fs::path, msgs::io::CaptureMeta> meta_of;
       for (Item& it : items) {
         if (!marked.count(it.capture)) {
           meta_of[it.source] = std::move(it.meta);
           continue;
         }
-        it.capture = std::size_t(std::distance(marked.begin(), marked.find(it.capture)));
         panels.push_back(std::move(it));
       }
       std::vector<msgs::io::CaptureFiles> flight;
