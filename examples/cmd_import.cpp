@@ -844,10 +844,12 @@ int run_import(const std::vector<std::string>& argv) {
     for (const auto& f : fl) names.push_back(f.generic_string());
     std::printf("  warning: skipping band %s (no msgs band slot): %s\n", name.c_str(), list_some(names, 3).c_str());
   }
-  if (!scan.unmatched.empty()) {
-    std::vector<std::string> names;
-    for (const auto& f : scan.unmatched) names.push_back(f.generic_string());
-    std::printf("  warning: %zu files match no pattern and are ignored: %s\n", names.size(), list_some(names, 4).c_str());
+  {
+    std::vector<std::string> names;  // (the --panels list may sit among the images)
+    for (const auto& f : scan.unmatched)
+      if ((images / f).lexically_normal() != panels_file.lexically_normal()) names.push_back(f.generic_string());
+    if (!names.empty())
+      std::printf("  warning: %zu files match no pattern and are ignored: %s\n", names.size(), list_some(names, 4).c_str());
   }
   {
     std::vector<std::string> incomplete;
