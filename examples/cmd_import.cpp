@@ -259,6 +259,26 @@ std::string list_some(const std::vector<std::string>& v, std::size_t n = 6) {
   return s;
 }
 
+/// The values a band's images were written with: a histogram over [0, 1] in steps of 0.001 (values
+/// above 1 are clipped to it and counted apart), for the percentiles the log reports.
+struct ValueHistogram {
+  std::array<std::uint64_t, 1001> bins{};
+  std::uint64_t above = 0, pixels = 0;
+  void add(float v) {
+    ++pixels;
+    above += v > 1.0f;
+    bins[std::size_t(std::lround(std::clamp(double(v), 0.0, 1.0) * 1000.0))] += 1;
+  }
+  /// The value below which a share `q` of the pixels lies (to 0.001).
+  double quantile(double q) const {
+    const double target = q * double(pixels);
+    std::uint64_t seen = 0;
+    for (std::size_t i = 0; i < bins.size(); ++i)
+      if (double(seen += bins[i]) >= target && seen > 0) return double(i) / 1000.0;
+    return 1.0;
+  }
+};
+
 /// A multispectral band image as stored (values in [0, 1]) and the digital number of a stored 1.
 struct BandImage {
   msgs::Image<float> raw;
@@ -1053,7 +1073,8 @@ int run_import(const std::vector<std::string>& argv) {
                            : items[i].radiometry_applied ? msgs::io::band_scale(mx)
                                                          : 1.0 / items[i].rad.dn_max;
   }
-  std::map<std::string, std::array<std::size_t, 2>> clipped;  // band -> (pixels above 1, pixels)
+  std::map<std::string, ValueHistogram> written;  // band -> its values, before clipping at 1
+  nlohmann::ordered_json reflectance_percentiles = nlohmann::ordered_json::object();
   for (Item& it : items) {
     const fs::path src = images / it.source;
     const msgs::Image<float> raw = msgs::io::read_image(src);
@@ -1068,10 +1089,9 @@ int run_import(const std::vector<std::string>& argv) {
       continue;
     }
     msgs::Image<float> norm = msgs::io::normalise_image(raw, it.rad, src);
-    auto& [above, pixels] = clipped[it.band];
-    pixels += norm.data.size();
+    ValueHistogram& h = written[it.band];
     for (float& v : norm.data) {
-      above += v > 1.0f;
+      h.add(v);
       v = std::min(v, 1.0f);
     }
     msgs::io::write_png16(layout / "images" / it.out_name, norm);
@@ -1107,11 +1127,17 @@ int run_import(const std::vector<std::string>& argv) {
                     " irradiance does not follow; --radiometry panel+dls does\n",
                     band.c_str(), 100.0 * (dls_hi / dls_lo - 1.0));
     }
-    for (const auto& [band, c] : clipped)  // (relative radiance peaks at 1 by construction)
-      if (c[0] > 0)
+    // What the bands hold, to hold against what the surfaces should reflect (vegetation: a few
+    // percent in red, 30-50% in the near infra-red).
+    for (const auto& [band, h] : written) {
+      std::printf("  %s: reflectance %.3f / %.3f / %.3f (5th percentile / median / 95th, %llu pixels)\n", band.c_str(),
+                  h.quantile(0.05), h.quantile(0.5), h.quantile(0.95), static_cast<unsigned long long>(h.pixels));
+      reflectance_percentiles[band] = {{"p5", h.quantile(0.05)}, {"p50", h.quantile(0.5)}, {"p95", h.quantile(0.95)}};
+      if (h.above > 0)  // (relative radiance peaks at 1 by construction)
         std::printf("  warning: %s: %.3g%% of the pixels have a reflectance above 1, clipped to 1 (specular highlights,"
                     " or an irradiance that does not fit the light the camera saw)\n",
-                    band.c_str(), 100.0 * double(c[0]) / double(c[1]));
+                    band.c_str(), 100.0 * double(h.above) / double(h.pixels));
+    }
   }
   std::printf("  radiometry and copies: %zu images in %.1f s\n", items.size(), since(t_meta));
   std::fflush(stdout);
@@ -1270,6 +1296,7 @@ int run_import(const std::vector<std::string>& argv) {
   meta_json["images"] = items.size();
   if (!panel_keys.empty()) meta_json["calibration_captures_set_aside"] = panel_keys;
   if (!panel_report.empty()) meta_json["calibration_panels"] = panel_report;
+  if (reflectance) meta_json["reflectance_percentiles"] = reflectance_percentiles;
   meta_json["mean_reprojection_error_px"] = opt_number(reproj);
   meta_json["colmap_camera_model"] = model;
   meta_json["colmap_sift_peak_threshold"] = sift_threshold;

@@ -546,10 +546,24 @@ TEST_CASE("msgs import --radiometry panel, panel+dls: the panel capture is set a
     CHECK(p["light_sensor_w_m2_nm"].get<double>() / p["irradiance_w_m2_nm"].get<double>() ==
           doctest::Approx(1.1).epsilon(0.01));
   }
+  std::map<std::string, std::vector<double>> values;  // band -> every pixel written
   for (const auto& f : tf["frames"]) {
     CHECK(f["source"].get<std::string>().rfind("IMG_0006", 0) != 0);
     CHECK_MESSAGE(median_ratio_to_truth(dir, dir / "both", f, scene, opt) == doctest::Approx(1.0).epsilon(0.01),
                   f["source"].get<std::string>());
+    const auto img = msgs::io::read_image(dir / "both" / f["file_path"].get<std::string>());
+    auto& v = values[f["mm_channel"].get<std::string>()];
+    v.insert(v.end(), img.data.begin(), img.data.end());
+  }
+  // The log's percentiles of each band are those of the images written (to their 0.001 steps).
+  const auto& pct = tf["msgs_import"]["reflectance_percentiles"];
+  REQUIRE(pct.size() == 4);
+  for (auto& [band, v] : values) {
+    std::sort(v.begin(), v.end());
+    CAPTURE(band);
+    CHECK(std::abs(pct[band]["p50"].get<double>() - v[v.size() / 2]) <= 0.0011);
+    CHECK(std::abs(pct[band]["p95"].get<double>() - v[v.size() * 95 / 100]) <= 0.0011);
+    CHECK(std::abs(pct[band]["p5"].get<double>() - v[v.size() * 5 / 100]) <= 0.0011);
   }
 
   // The panel alone: every frame under the panel capture's light, off by the light's change.
