@@ -347,9 +347,7 @@ double calibrate_with_panels(std::vector<Item>& panels, const std::vector<std::s
            " with --panel-albedo 0.49, or per band --panel-albedo MS_G=0.49,MS_R=0.49,...)");
     }
     const BandImage img = read_band_image(src, band);
-    p.width = img.raw.width;
-    p.height = img.raw.height;
-    p.rad = msgs::io::frame_radiometry(p.meta, steps, img.dn_max, p.width, p.height);
+    p.rad = msgs::io::frame_radiometry(p.meta, steps, img.dn_max, img.raw.width, img.raw.height);
     const msgs::io::PanelReading reading = msgs::io::read_panel(img.raw, p.rad, *p.meta.panel_area, src);
     const double e = reading.mean / albedo;
     p.rad.scale = 1.0 / e;
@@ -1130,9 +1128,10 @@ int run_import(const std::vector<std::string>& argv) {
     // What the bands hold, to hold against what the surfaces should reflect (vegetation: a few
     // percent in red, 30-50% in the near infra-red).
     for (const auto& [band, h] : written) {
-      std::printf("  %s: reflectance %.3f / %.3f / %.3f (5th percentile / median / 95th, %llu pixels)\n", band.c_str(),
-                  h.quantile(0.05), h.quantile(0.5), h.quantile(0.95), static_cast<unsigned long long>(h.pixels));
-      reflectance_percentiles[band] = {{"p5", h.quantile(0.05)}, {"p50", h.quantile(0.5)}, {"p95", h.quantile(0.95)}};
+      const double p5 = h.quantile(0.05), p50 = h.quantile(0.5), p95 = h.quantile(0.95);
+      std::printf("  %s: reflectance %.3f / %.3f / %.3f (5th percentile / median / 95th, %llu pixels)\n", band.c_str(), p5,
+                  p50, p95, static_cast<unsigned long long>(h.pixels));
+      reflectance_percentiles[band] = {{"p5", p5}, {"p50", p50}, {"p95", p95}};
       if (h.above > 0)  // (relative radiance peaks at 1 by construction)
         std::printf("  warning: %s: %.3g%% of the pixels have a reflectance above 1, clipped to 1 (specular highlights,"
                     " or an irradiance that does not fit the light the camera saw)\n",

@@ -223,9 +223,8 @@ inline std::array<std::array<long, 2>, 4> panel_area(int width, int height, doub
 inline Image<float> panel_radiance(int width, int height, const io::PanelArea& q, double albedo) {
   Image<float> img(width, height, 1);
   for (int y = 0; y < height; ++y)
-    for (int x = 0; x < width; ++x) {
+    for (int x = 0; x < width; ++x)
       img.at(x, y, 0) = float(io::inside_quad(q, x, y) ? albedo : 0.08 + 0.04 * y / std::max(1, height - 1));
-    }
   return img;
 }
 
