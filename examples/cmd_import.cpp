@@ -50,7 +50,8 @@ using msgs::io::fail;
 constexpr const char* kUsage =
     "usage: msgs import --images DIR --out DIR [--camera auto|micasense|dji|sequoia]\n"
     "                   [--bands PATTERN=ID,...] [--eval-every N] [--camera-model M]\n"
-    "                   [--radiometry auto|none|reflectance|panel|panel+dls] [--panel-albedo A]\n"
+    "                   [--radiometry auto|none|reflectance|sun-sensor|panel|panel+dls]\n"
+    "                   [--panel-albedo A]\n"
     "                   [--panels FILE]\n"
     "                   [--matching exhaustive|window|gps]\n"
     "                   [--window N] [--neighbours K] [--sift-threshold T] [--ba-tolerance X]\n"
@@ -76,7 +77,9 @@ constexpr const char* kUsage =
     "     such as NDVI computed from them are shifted from reflectance-based ones. With\n"
     "     --radiometry reflectance, MicaSense files give reflectance instead: pi x radiance (a1\n"
     "     of RadiometricCalibration) / the horizontal irradiance of the DLS 2 light sensor; with\n"
-    "     panel or panel+dls, reflectance from the calibration-panel captures the camera marked.\n"
+    "     panel or panel+dls, reflectance from the calibration-panel captures the camera marked;\n"
+    "     with sun-sensor, reflectance up to one factor common to all bands from DJI's sunlight\n"
+    "     sensor (or MicaSense's DLS 2), so that indices such as NDVI are those of reflectance.\n"
     "     Captures marked as pictures of a calibration panel (Camera:CalibrationPicture) are set\n"
     "     aside in every mode: they are not part of the scene.\n"
     "  3. Poses with COLMAP on the CPU (feature_extractor with one camera per band and the focal\n"
@@ -113,8 +116,13 @@ constexpr const char* kUsage =
     "                      the captures of a calibration panel the camera marked and read:\n"
     "                      CalibrationPicture 2 with the panel's Albedo and ReflectArea; one\n"
     "                      irradiance per band, the mean over the panel's area of the corrected\n"
-    "                      DN / albedo) or panel+dls (the DLS 2 follows the light through the\n"
-    "                      flight, the panel sets its level)\n"
+    "                      DN / albedo), panel+dls (the light sensor, MicaSense's DLS 2 or DJI's\n"
+    "                      sunlight sensor, follows the light through the flight, the panel sets\n"
+    "                      its level) or sun-sensor (each image divided by its light sensor's\n"
+    "                      reading and multiplied by the band camera's calibration, DJI's\n"
+    "                      SensorGainAdjustment or MicaSense's a1, as DJI's guides compute NDVI;\n"
+    "                      then one scale for all bands, the brightest value of any band 1:\n"
+    "                      band ratios and indices as from reflectance, the level unknown)\n"
     "  --panel-albedo A    the panel's reflectance, for every band (0.49) or per band\n"
     "                      (MS_G=0.49,MS_R=0.5,...): where Camera:Albedo is missing, or to\n"
     "                      override it with the panel's calibration sheet\n"
@@ -125,7 +133,8 @@ constexpr const char* kUsage =
     "                      file relative to --images; area the corners of the panel's reflecting\n"
     "                      part in that image, x and y in pixels, in order around it; albedo per\n"
     "                      picture or for all (else Camera:Albedo or --panel-albedo). Their\n"
-    "                      captures are set aside; each listed picture calibrates its band\n"
+    "                      captures are set aside in every mode; with panel and panel+dls each\n"
+    "                      listed picture calibrates its band\n"
     "  --matching M        image pairs COLMAP matches: exhaustive (default: every pair; the time\n"
     "                      grows with the square of the image count), window (the bands of a\n"
     "                      capture with each other, and each band with the same band of the next\n"
@@ -237,6 +246,10 @@ std::string radiometry_formula(const msgs::io::FrameRadiometry& r, bool applied,
   switch (calibration) {
     case msgs::io::Calibration::relative: return "value = " + v;
     case msgs::io::Calibration::sun_sensor: return "reflectance = " + v + ", scale = pi * a1 / (dn_max + 1)";
+    case msgs::io::Calibration::sun_sensor_relative:
+      return "reflectance up to a factor common to all bands = " + v + ", scale = " +
+             (r.radiance_a1 > 0 ? "pi * a1" : "SensorGainAdjustment") +
+             " / (dn_max + 1) * one factor for all bands (the brightest value of any band 1)";
     default:
       return "reflectance = " + v + ", scale = 1 / the mean over the band's calibration-panel pictures of the same" +
              " without scale, averaged over the panel's area and divided by its albedo";
@@ -319,8 +332,8 @@ std::vector<std::size_t> usable_panels(const std::vector<Item>& panels, const st
                      : panels.empty() ? std::string("no capture in --images is marked as one")
                                       : std::string("no panel capture holds this band"),
                      "\n  msgs does not search images for a panel: list the panel pictures and their areas with",
-                     " --panels FILE (see msgs import --help), or use --radiometry reflectance (the DLS 2 alone) or",
-                     " auto (relative radiance)"));
+                     " --panels FILE (see msgs import --help), or use --radiometry reflectance (MicaSense's DLS 2 alone),",
+                     " sun-sensor (the light sensor alone, band ratios only) or auto (relative radiance)"));
   return use;
 }
 
@@ -359,7 +372,10 @@ double calibrate_with_panels(std::vector<Item>& panels, const std::vector<std::s
                 albedo, albedo_from.c_str(), reading.pixels,
                 watts > 0 ? cat("irradiance ", msgs::io::short_number(watts, 4), " W/m^2/nm").c_str()
                           : cat("irradiance ", msgs::io::short_number(e, 4), " in the sensor's units").c_str(),
-                steps.irradiance ? cat(", the light sensor read ", msgs::io::short_number(p.rad.irradiance, 4)).c_str() : "");
+                steps.irradiance ? cat(", the light sensor read ", msgs::io::short_number(p.rad.irradiance, 4),
+                                       p.meta.irradiance_si ? " W/m^2/nm" : " (its own units)")
+                                       .c_str()
+                                 : "");
     nlohmann::ordered_json j;
     j["band"] = band;
     j["source"] = p.source.generic_string();
@@ -370,7 +386,7 @@ double calibrate_with_panels(std::vector<Item>& panels, const std::vector<std::s
     j["saturated_pixels"] = reading.saturated;
     j["mean_response"] = reading.mean;
     if (watts > 0) j["irradiance_w_m2_nm"] = watts;
-    if (steps.irradiance) j["light_sensor_w_m2_nm"] = p.rad.irradiance;
+    if (steps.irradiance) j[p.meta.irradiance_si ? "light_sensor_w_m2_nm" : "light_sensor"] = p.rad.irradiance;
     if (!p.meta.panel_serial.empty()) j["panel_serial"] = p.meta.panel_serial;
     report.push_back(j);
   }
@@ -378,7 +394,7 @@ double calibrate_with_panels(std::vector<Item>& panels, const std::vector<std::s
     std::printf("  warning: %s: the %zu panel pictures disagree by %.3g%% (%s); their mean is used\n", band.c_str(),
                 use.size(), 100.0 * (hi / lo - 1.0),
                 steps.irradiance ? "after the light sensor's readings: a shaded or tilted panel?"
-                                 : "the light changed between them? --radiometry panel+dls follows it with the DLS 2");
+                                 : "the light changed between them? --radiometry panel+dls follows it with the light sensor");
   return double(use.size()) / sum;
 }
 
@@ -790,17 +806,19 @@ int run_import(const std::vector<std::string>& argv) {
       {"none", msgs::io::Calibration::relative},
       {"reflectance", msgs::io::Calibration::sun_sensor},
       {"panel", msgs::io::Calibration::panel},
-      {"panel+dls", msgs::io::Calibration::panel_and_sun_sensor}};
+      {"panel+dls", msgs::io::Calibration::panel_and_sun_sensor},
+      {"sun-sensor", msgs::io::Calibration::sun_sensor_relative}};
   if (!calibrations.count(radiometry))
-    throw msgs::cli::UsageError("--radiometry expects auto, none, reflectance, panel or panel+dls, got '" + radiometry + "'");
+    throw msgs::cli::UsageError("--radiometry expects auto, none, reflectance, sun-sensor, panel or panel+dls, got '" +
+                                radiometry + "'");
   const msgs::io::Calibration calibration = calibrations.at(radiometry);
   const bool reflectance = calibration != msgs::io::Calibration::relative;
   const bool by_panel =
       calibration == msgs::io::Calibration::panel || calibration == msgs::io::Calibration::panel_and_sun_sensor;
+  const bool band_ratios = calibration == msgs::io::Calibration::sun_sensor_relative;  // one scale for all bands
   const std::map<std::string, double> panel_albedo = parse_panel_albedo(args.get("panel-albedo", ""));
   if (!panel_albedo.empty() && !by_panel)
     throw msgs::cli::UsageError("--panel-albedo goes with --radiometry panel or panel+dls");
-  if (args.has("panels") && !by_panel) throw msgs::cli::UsageError("--panels goes with --radiometry panel or panel+dls");
   const std::string matching = args.get("matching", "exhaustive");
   if (matching != "exhaustive" && matching != "window" && matching != "gps")
     throw msgs::cli::UsageError("--matching expects exhaustive, window or gps, got '" + matching + "'");
@@ -1003,6 +1021,8 @@ int run_import(const std::vector<std::string>& argv) {
   std::map<std::string, std::vector<std::size_t>> by_band;
   for (std::size_t i = 0; i < items.size(); ++i) by_band[items[i].band].push_back(i);
   nlohmann::ordered_json panel_report = nlohmann::ordered_json::array();  // what each panel picture gave
+  double all_bands_max = 0.0;  // sun-sensor: the brightest value of any band, and its band
+  std::string brightest_band;
   for (const auto& [band, idx] : by_band) {
     if (band == "D") continue;
     msgs::io::RadiometrySteps steps;
@@ -1040,11 +1060,13 @@ int run_import(const std::vector<std::string>& argv) {
           fail(images / srcs[0],
                cat("--radiometry ", radiometry, " needs every step",
                    calibration == msgs::io::Calibration::sun_sensor ? ", MicaSense's radiance calibration and the DLS 2 irradiance"
-                   : by_panel && calibration != msgs::io::Calibration::panel ? " and the DLS 2 irradiance"
+                   : band_ratios ? ", the band camera's calibration and the light sensor's reading"
+                   : by_panel && calibration != msgs::io::Calibration::panel ? " and the light sensor's reading"
                                                                                : "",
                    " in every image of band ", band, by_panel ? " and in its panel pictures" : "", ":", what,
-                   "\n  msgs computes reflectance from MicaSense's light sensor and panels only; use",
-                   " --radiometry auto for relative radiance"));
+                   "\n  msgs computes reflectance from MicaSense's DLS 2 (reflectance), from a light sensor up to",
+                   " one factor for all bands (sun-sensor: MicaSense, DJI) and from calibration panels (panel,",
+                   " panel+dls); use --radiometry auto for relative radiance"));
         }
         std::printf("  warning: %s: corrections left out for the whole band (%s):%s\n", band.c_str(),
                     steps.any() ? "the others are applied" : "stored values kept", what.c_str());
@@ -1060,8 +1082,16 @@ int run_import(const std::vector<std::string>& argv) {
       it.height = raw.height;
       it.rad = msgs::io::frame_radiometry(it.meta, steps, img.dn_max, raw.width, raw.height);
       it.radiometry_applied = steps.any();
-      if (it.radiometry_applied && !reflectance)
+      if (band_ratios) it.rad.scale = msgs::io::light_sensor_scale(it.rad);
+      if (it.radiometry_applied && (!reflectance || band_ratios))
         mx = std::max(mx, double(msgs::io::max_value(msgs::io::normalise_image(raw, it.rad, src))));
+    }
+    if (band_ratios) {  // the common scale is set once every band's maximum is known
+      if (mx > all_bands_max) {
+        all_bands_max = mx;
+        brightest_band = band;
+      }
+      continue;
     }
     const double panel_scale =
         by_panel ? calibrate_with_panels(panels, band_panels, band, steps, panel_albedo, images, panel_report) : 0.0;
@@ -1070,6 +1100,14 @@ int run_import(const std::vector<std::string>& argv) {
                            : reflectance                 ? msgs::io::reflectance_scale(items[i].rad)
                            : items[i].radiometry_applied ? msgs::io::band_scale(mx)
                                                          : 1.0 / items[i].rad.dn_max;
+  }
+  double common = 1.0;
+  if (band_ratios) {
+    common = msgs::io::band_scale(all_bands_max);
+    for (Item& it : items)
+      if (it.band != "D") it.rad.scale *= common;
+    std::printf("  sun-sensor: one scale for all bands, %.6g, from the brightest value (in %s)\n", common,
+                brightest_band.c_str());
   }
   std::map<std::string, ValueHistogram> written;  // band -> its values, before clipping at 1
   nlohmann::ordered_json reflectance_percentiles = nlohmann::ordered_json::object();
@@ -1113,7 +1151,12 @@ int run_import(const std::vector<std::string>& argv) {
       const std::string how = calibration == msgs::io::Calibration::sun_sensor ? "the light sensor's readings"
                               : calibration == msgs::io::Calibration::panel    ? "the panel's"
                                                                                : "the light sensor's readings, levelled by the panel";
-      if (lo > 0)
+      if (band_ratios) {
+        if (dls_hi > 0)
+          std::printf("  %s: the light sensor read %s to %s%s\n", band.c_str(), msgs::io::short_number(dls_lo, 4).c_str(),
+                      msgs::io::short_number(dls_hi, 4).c_str(),
+                      items[idx[0]].meta.irradiance_si ? " W/m^2/nm" : " (its own units)");
+      } else if (lo > 0)
         std::printf("  %s: reflectance under %s W/m^2/nm of sunlight (%s)\n", band.c_str(),
                     (calibration == msgs::io::Calibration::panel ? msgs::io::short_number(lo, 4)
                                                                  : cat(msgs::io::short_number(lo, 4), " to ", msgs::io::short_number(hi, 4)))
@@ -1129,8 +1172,8 @@ int run_import(const std::vector<std::string>& argv) {
     // percent in red, 30-50% in the near infra-red).
     for (const auto& [band, h] : written) {
       const double p5 = h.quantile(0.05), p50 = h.quantile(0.5), p95 = h.quantile(0.95);
-      std::printf("  %s: reflectance %.3f / %.3f / %.3f (5th percentile / median / 95th, %llu pixels)\n", band.c_str(), p5,
-                  p50, p95, static_cast<unsigned long long>(h.pixels));
+      std::printf("  %s: %sreflectance %.3f / %.3f / %.3f (5th percentile / median / 95th, %llu pixels)\n", band.c_str(),
+                  band_ratios ? "relative " : "", p5, p50, p95, static_cast<unsigned long long>(h.pixels));
       reflectance_percentiles[band] = {{"p5", p5}, {"p50", p50}, {"p95", p95}};
       if (h.above > 0)  // (relative radiance peaks at 1 by construction)
         std::printf("  warning: %s: %.3g%% of the pixels have a reflectance above 1, clipped to 1 (specular highlights,"
@@ -1296,6 +1339,7 @@ int run_import(const std::vector<std::string>& argv) {
   if (!panel_keys.empty()) meta_json["calibration_captures_set_aside"] = panel_keys;
   if (!panel_report.empty()) meta_json["calibration_panels"] = panel_report;
   if (reflectance) meta_json["reflectance_percentiles"] = reflectance_percentiles;
+  if (band_ratios) meta_json["sun_sensor_common_scale"] = {{"scale", common}, {"brightest_band", brightest_band}};
   meta_json["mean_reprojection_error_px"] = opt_number(reproj);
   meta_json["colmap_camera_model"] = model;
   meta_json["colmap_sift_peak_threshold"] = sift_threshold;
@@ -1364,11 +1408,13 @@ int run_import(const std::vector<std::string>& argv) {
                                       ? "fall-off: the image is divided by 1 + k0 r + k1 r^2 + ..."
                                       : "correction: the image is multiplied by 1 + k0 r + k1 r^2 + ...";
       if (s.row_gradient) rad["row_gradient_a2_a3"] = {it.rad.row_a2, it.rad.row_a3};
-      if (reflectance && it.rad.radiance_a1 > 0) {
+      if (reflectance && !band_ratios && it.rad.radiance_a1 > 0) {
         rad["radiance_a1"] = it.rad.radiance_a1;
         rad["irradiance_w_m2_nm"] = msgs::io::reflectance_irradiance(it.rad);
       }
-      if (s.irradiance) rad["light_sensor_w_m2_nm"] = it.rad.irradiance;
+      if (s.irradiance) rad[it.meta.irradiance_si ? "light_sensor_w_m2_nm" : "light_sensor"] = it.rad.irradiance;
+      if (band_ratios) rad[it.rad.radiance_a1 > 0 ? "radiance_a1" : "gain_adjustment"] =
+          it.rad.radiance_a1 > 0 ? it.rad.radiance_a1 : it.rad.gain_adjustment;
       rad["scale"] = it.rad.scale;
       rad["dn_max"] = it.rad.dn_max;
       rad["formula"] = radiometry_formula(it.rad, it.radiometry_applied, calibration);

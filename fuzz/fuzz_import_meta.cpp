@@ -57,6 +57,14 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       io::check_radiometry(q, 8, 6, "fuzz.tif");
       (void)io::relative_radiance(1000.0, 3.0, 2.0, q);
     }
+    // And the light sensor's band ratios (DJI's sunlight sensor, MicaSense's DLS 2).
+    const io::BandPlan sun = io::plan_band({m, m}, {"a.tif", "b.tif"}, io::Calibration::sun_sensor_relative);
+    if (sun.missing.empty()) {
+      io::FrameRadiometry q = io::frame_radiometry(m, sun.steps, 65535.0, 8, 6);
+      q.scale = io::light_sensor_scale(q);
+      io::check_radiometry(q, 8, 6, "fuzz.tif");
+      (void)io::relative_radiance(1000.0, 3.0, 2.0, q);
+    }
     // A panel's area, however odd its corners, reads as a finite mean or an IoError.
     if (m.panel_area) {
       const io::BandPlan pp = io::plan_band({m}, {"p.tif"}, io::Calibration::panel);

@@ -450,7 +450,7 @@ TEST_CASE("msgs import: synthetic MicaSense captures through exiv2 + COLMAP") {
     // and the bottom quarter agree with the truth alike.
     REQUIRE(rn_top.size() > 100);
     REQUIRE(rn_bottom.size() > 100);
-    CHECK(median(rn_bottom) / median(rn_top) == doctest::Approx(1.0).epsilon(0.01));
+    CHECK(median(rn_bottom) / median(rn_top) == doctest::Approx(1.0).epsilon(0.01).scale(0));
     norm_ratio[f["mm_channel"]].push_back(median(rn));
     raw_ratio[f["mm_channel"]].push_back(median(rr));
   }
@@ -490,12 +490,13 @@ TEST_CASE("msgs import --radiometry reflectance: the DLS 2 takes out changing su
     e_hi = std::max(e_hi, e);
     // The scene's values are the reflectances: every image, whatever its exposure and light,
     // gives them back.
-    CHECK_MESSAGE(median_ratio_to_truth(dir, dir / "ds", f, scene, opt) == doctest::Approx(1.0).epsilon(0.01),
+    CHECK_MESSAGE(median_ratio_to_truth(dir, dir / "ds", f, scene, opt) == doctest::Approx(1.0).epsilon(0.01).scale(0),
                   f["source"].get<std::string>());
   }
   CHECK(e_hi / e_lo > 1.2);  // the light did change
 
-  // DJI files carry no irradiance msgs reads: refused before COLMAP, naming what is missing.
+  // DJI's sunlight sensor reads in its own units, without a radiance calibration: refused before
+  // COLMAP, naming what is missing and the modes that take DJI's sensor.
   msgs::synth::RawOptions dji;
   dji.camera = "dji";
   dji.captures = 2;
@@ -508,6 +509,7 @@ TEST_CASE("msgs import --radiometry reflectance: the DLS 2 takes out changing su
   CHECK(rc_dji == 1);
   CHECK_MESSAGE(text.find("--radiometry reflectance needs") != std::string::npos, text);
   CHECK_MESSAGE(text.find("horizontal irradiance (MicaSense DLS 2) missing in 2 of 2 files") != std::string::npos, text);
+  CHECK_MESSAGE(text.find("up to one factor for all bands (sun-sensor: MicaSense, DJI)") != std::string::npos, text);
   CHECK(!fs::exists(dir / "dji"));
   CHECK(!leftovers(dir, "dji"));
 }
@@ -544,12 +546,12 @@ TEST_CASE("msgs import --radiometry panel, panel+dls: the panel capture is set a
     CHECK(p["pixels"].get<int>() > 400);
     // The light sensor read 10% more than the panel's irradiance.
     CHECK(p["light_sensor_w_m2_nm"].get<double>() / p["irradiance_w_m2_nm"].get<double>() ==
-          doctest::Approx(1.1).epsilon(0.01));
+          doctest::Approx(1.1).epsilon(0.01).scale(0));
   }
   std::map<std::string, std::vector<double>> values;  // band -> every pixel written
   for (const auto& f : tf["frames"]) {
     CHECK(f["source"].get<std::string>().rfind("IMG_0006", 0) != 0);
-    CHECK_MESSAGE(median_ratio_to_truth(dir, dir / "both", f, scene, opt) == doctest::Approx(1.0).epsilon(0.01),
+    CHECK_MESSAGE(median_ratio_to_truth(dir, dir / "both", f, scene, opt) == doctest::Approx(1.0).epsilon(0.01).scale(0),
                   f["source"].get<std::string>());
     const auto img = msgs::io::read_image(dir / "both" / f["file_path"].get<std::string>());
     auto& v = values[f["mm_channel"].get<std::string>()];
@@ -579,7 +581,7 @@ TEST_CASE("msgs import --radiometry panel, panel+dls: the panel capture is set a
     const int capture = std::stoi(src.substr(4, 4)) - 1;
     const double expected = msgs::synth::raw_light(opt.seed, capture, opt.light_variation) /
                             msgs::synth::raw_light(opt.seed, panel_capture, opt.light_variation);
-    CHECK_MESSAGE(median_ratio_to_truth(dir, dir / "alone", f, scene, opt) == doctest::Approx(expected).epsilon(0.01), src);
+    CHECK_MESSAGE(median_ratio_to_truth(dir, dir / "alone", f, scene, opt) == doctest::Approx(expected).epsilon(0.01).scale(0), src);
   }
 
   // Without a panel capture, and --panel-albedo without a panel mode: refused, nothing left behind.
@@ -605,18 +607,24 @@ TEST_CASE("msgs import --radiometry panel, panel+dls: the panel capture is set a
                 usage.second);
 }
 
-TEST_CASE("msgs import --panels: a DJI flight's panel pictures, listed by hand, calibrate it") {
-  // A Mavic 3M marks no panel pictures and msgs reads no DJI light sensor: the panel capture after
-  // the flight (0007), listed with its areas in panels.json, is the reflectance's only reference.
+TEST_CASE("msgs import: a DJI flight's sunlight sensor, with the panel pictures listed by hand or without") {
+  // A Mavic 3M marks no panel pictures: the panel capture after the flight (0007) is listed with
+  // its areas in panels.json. The light changes by up to 25% from capture to capture, and the
+  // sunlight sensor reads 10% high.
   msgs::synth::RawOptions opt = small_micasense_set();
   opt.camera = "dji";
   opt.captures = 6;
   opt.panel_captures = 1;
-  const auto dir_or = colmap_case("panels", "calibration panels listed by hand", opt);
+  opt.light_variation = 0.25;
+  opt.dls_bias = 0.1;
+  const auto dir_or = colmap_case("panels", "DJI's sunlight sensor and calibration panels listed by hand", opt);
   if (!dir_or) return;
   const fs::path& dir = *dir_or;
-  const std::string list = "--radiometry panel --panels '" + (dir / "raw" / "panels.json").string() + "'";
-  const auto ok = import_ok(dir, "ds", list);
+  const std::string list = " --panels '" + (dir / "raw" / "panels.json").string() + "'";
+  const msgs::synth::SynthScene scene = msgs::synth::make_scene(raw_set_preset(opt), opt.seed);
+
+  // panel+dls: the sensor follows the light, the listed panel sets each band's level.
+  const auto ok = import_ok(dir, "ds", "--radiometry panel+dls" + list);
   REQUIRE_MESSAGE(ok.first == 0, ok.second);
   CHECK_MESSAGE(ok.second.find("1 capture of a calibration panel set aside (Xmp.Camera.CalibrationPicture, --panels): 0007") !=
                     std::string::npos,
@@ -629,15 +637,42 @@ TEST_CASE("msgs import --panels: a DJI flight's panel pictures, listed by hand, 
   for (const auto& p : panels) {
     CHECK(p["albedo_from"] == "--panels");
     CHECK(!p.contains("irradiance_w_m2_nm"));  // no radiance calibration in DJI files
+    CHECK(p["light_sensor"].get<double>() > 0);  // in the sensor's own units
   }
-  const msgs::synth::SynthScene scene = msgs::synth::make_scene(raw_set_preset(opt), opt.seed);
   int checked = 0;
   for (const auto& f : tf["frames"]) {
     if (f["mm_channel"] == "D") continue;
     ++checked;
     CHECK(f["radiometry"]["formula"].get<std::string>().rfind("reflectance", 0) == 0);
-    CHECK_MESSAGE(median_ratio_to_truth(dir, dir / "ds", f, scene, opt) == doctest::Approx(1.0).epsilon(0.01),
+    CHECK(f["radiometry"]["metadata_keys"]["irradiance"] == "Xmp.drone-dji.Irradiance");
+    CHECK_MESSAGE(median_ratio_to_truth(dir, dir / "ds", f, scene, opt) == doctest::Approx(1.0).epsilon(0.01).scale(0),
                   f["source"].get<std::string>());
+  }
+  CHECK(checked == 24);
+
+  // sun-sensor, no panel (the listed capture is only set aside): DJI's formula gives reflectance
+  // up to one factor for all bands, (DN - black) / 2^16 / (exposure gain) x vignetting correction
+  // x SensorGainAdjustment / Irradiance = kDjiReflectanceFactor x reflectance / 1.1 in the
+  // synthetic set (the sensor reads 10% high), and msgs' one scale maps the brightest value to 1:
+  // every frame's ratio to the truth is that x the scale, whatever the light and the band.
+  const auto sun = import_ok(dir, "sun", "--radiometry sun-sensor" + list);
+  REQUIRE_MESSAGE(sun.first == 0, sun.second);
+  CHECK_MESSAGE(sun.second.find("MS_NIR: relative reflectance ") != std::string::npos, sun.second);
+  const Json ts = Json::parse(slurp(dir / "sun" / "transforms.json"));
+  const double common = ts["msgs_import"]["sun_sensor_common_scale"]["scale"].get<double>();
+  CHECK(!ts["msgs_import"].contains("calibration_panels"));
+  checked = 0;
+  for (const auto& f : ts["frames"]) {
+    if (f["mm_channel"] == "D") continue;
+    ++checked;
+    const std::string src = f["source"];
+    const auto& rad = f["radiometry"];
+    CHECK(rad["gain_adjustment"].get<double>() > 0.98);
+    CHECK(rad["light_sensor"].get<double>() > 0);
+    CHECK(rad["formula"].get<std::string>().find("SensorGainAdjustment") != std::string::npos);
+    CHECK_MESSAGE(median_ratio_to_truth(dir, dir / "sun", f, scene, opt) ==
+                      doctest::Approx(msgs::synth::kDjiReflectanceFactor / (1 + opt.dls_bias) * common).epsilon(0.01).scale(0),
+                  src);
   }
   CHECK(checked == 24);
 

@@ -14,6 +14,7 @@
 
 #include <array>
 #include <cmath>
+#include <numbers>
 #include <string>
 #include <vector>
 
@@ -314,7 +315,74 @@ TEST_CASE("radiometry: reflectance from MicaSense's a1 and the DLS 2 irradiance"
   img.at(int(x), int(y), 0) = float(dn / 65535);
   CHECK(normalise_image(img, r, "a.tif").at(int(x), int(y), 0) == doctest::Approx(rho).epsilon(1e-4));
   r.irradiance = 0;
-  CHECK_THROWS_WITH_AS(normalise_image(img, r, "a.tif"), doctest::Contains("a.tif: irradiance 0"), IoError);
+  CHECK_THROWS_WITH_AS(normalise_image(img, r, "a.tif"), doctest::Contains("a.tif: light sensor reading 0"), IoError);
+}
+
+TEST_CASE("radiometry: DJI's sunlight sensor and SensorGainAdjustment, reflectance up to one factor for all bands") {
+  // A Mavic 3M band image's keys, as exiv2 prints them (values of the kind real files carry).
+  const std::string dji =
+      "Exif.Image.Make                               DJI\n"
+      "Xmp.Camera.BlackCurrent                       3200\n"
+      "Xmp.drone-dji.ExposureTime                    732\n"
+      "Xmp.drone-dji.SensorGain                      1\n"
+      "Xmp.drone-dji.SensorGainAdjustment            1.033\n"
+      "Xmp.drone-dji.Irradiance                      16077.6\n"
+      "Xmp.drone-dji.VignettingData                  0,1.2e-05,0,3e-11,0,0\n"
+      "Xmp.drone-dji.CalibratedOpticalCenterX        83.2\n"
+      "Xmp.drone-dji.CalibratedOpticalCenterY        58.2\n";
+  const CaptureMeta m = parse_capture_meta(dji, "DJI_0001_MS_RE.TIF");
+  REQUIRE(m.irradiance);
+  CHECK(*m.irradiance == 16077.6);
+  CHECK(!m.irradiance_si);  // the sensor's own units
+  CHECK(m.source.at("irradiance") == "Xmp.drone-dji.Irradiance");
+  CHECK(*m.gain_adjustment == 1.033);
+  // Pix4D's Camera:Irradiance where a DJI file has no drone-dji key for it; a zero is no reading.
+  CHECK(*parse_capture_meta("Exif.Image.Make DJI\nXmp.Camera.Irradiance 900.5\n", "d.tif").irradiance == 900.5);
+  CHECK(!parse_capture_meta("Exif.Image.Make DJI\nXmp.drone-dji.Irradiance 0\n", "d.tif").irradiance);
+  // MicaSense's Camera:Irradiance is the DLS facing the sky, not a level-surface value: not read.
+  CHECK(!parse_capture_meta("Exif.Image.Make MicaSense\nXmp.Camera.Irradiance 0.98\n", "i.tif").irradiance);
+  CHECK_THROWS_WITH_AS(parse_capture_meta("Exif.Image.Make DJI\nXmp.drone-dji.SensorGainAdjustment -1\n", "d.tif"),
+                       doctest::Contains("d.tif: field 'Xmp.drone-dji.SensorGainAdjustment'"), IoError);
+  CHECK_THROWS_WITH_AS(parse_capture_meta("Exif.Image.Make DJI\nXmp.drone-dji.Irradiance x\n", "d.tif"),
+                       doctest::Contains("is not a sunlight-sensor reading"), IoError);
+
+  // The plans: sun-sensor takes DJI's reading and band factor; reflectance wants W/m^2/nm and a1;
+  // panel+dls takes the reading alone.
+  const BandPlan p = plan_band({m, m}, {"a.TIF", "b.TIF"}, Calibration::sun_sensor_relative);
+  CHECK(p.missing.empty());
+  CHECK(p.steps.irradiance);
+  CHECK(p.steps.black_level);
+  CHECK(p.steps.vignetting);
+  const BandPlan refl = plan_band({m}, {"a.TIF"}, Calibration::sun_sensor);
+  CHECK(refl.missing.count("horizontal irradiance (MicaSense DLS 2)") == 1);
+  CHECK(refl.missing.count("radiance calibration a1 (MicaSense RadiometricCalibration)") == 1);
+  CHECK(plan_band({m}, {"a.TIF"}, Calibration::panel_and_sun_sensor).missing.empty());
+  CaptureMeta no_adjustment = m, no_reading = m;
+  no_adjustment.gain_adjustment.reset();
+  no_reading.irradiance.reset();
+  const BandPlan q = plan_band({m, no_adjustment, no_reading}, {"a.TIF", "b.TIF", "c.TIF"}, Calibration::sun_sensor_relative);
+  CHECK(q.missing.at("band calibration (DJI SensorGainAdjustment, MicaSense RadiometricCalibration)") ==
+        std::vector<std::filesystem::path>{"b.TIF"});
+  CHECK(q.missing.at("light sensor reading (MicaSense DLS 2 HorizontalIrradiance, DJI Irradiance)") ==
+        std::vector<std::filesystem::path>{"c.TIF"});
+
+  // DJI's formula: (DN - black) / 2^16 / (exposure x gain) x vignetting correction x
+  // SensorGainAdjustment / Irradiance, here for a pixel at the vignetting centre.
+  FrameRadiometry r = frame_radiometry(m, p.steps, 65535, 160, 120);
+  r.scale = light_sensor_scale(r);
+  const double dn = 20000, x = 83.2, y = 58.2;
+  const double dji_ratio = (dn - 3200) / 65536 / (732e-6 * 1.0) * 1.033 / 16077.6;
+  CHECK(relative_radiance(dn, x, y, r) * r.scale == doctest::Approx(dji_ratio).epsilon(1e-12));
+  // Off the centre the correction polynomial multiplies.
+  const double corr = 1 + 1.2e-05 * 1e2 + 3e-11 * 1e4;  // r = 10 px: 1 + k1 r^2 + k3 r^4
+  CHECK(relative_radiance(dn, x + 10, y, r) * r.scale == doctest::Approx(dji_ratio * corr).epsilon(1e-12));
+  // With MicaSense's a1 the same factor is pi a1 / 2^16.
+  FrameRadiometry a = r;
+  a.radiance_a1 = 1e-4;
+  CHECK(light_sensor_scale(a) == doctest::Approx(std::numbers::pi * 1e-4 / 65536));
+  a.radiance_a1 = 0;
+  a.gain_adjustment = 0;
+  CHECK(light_sensor_scale(a) == 0);
 }
 
 TEST_CASE("calibration panel: tags, the area's pixels, the band's irradiance, and unusable pictures") {
@@ -394,7 +462,7 @@ TEST_CASE("calibration panel: tags, the area's pixels, the band's irradiance, an
   no_a1.radiance_a1.reset();
   CHECK(plan_band({no_a1}, {"a.tif"}, Calibration::panel).missing.empty());
   const BandPlan both = plan_band({no_a1}, {"a.tif"}, Calibration::panel_and_sun_sensor);
-  CHECK(both.missing.count("horizontal irradiance (MicaSense DLS 2)") == 1);
+  CHECK(both.missing.count("light sensor reading (MicaSense DLS 2 HorizontalIrradiance, DJI Irradiance)") == 1);
   CHECK(both.missing.count("radiance calibration a1 (MicaSense RadiometricCalibration)") == 0);
   CaptureMeta no_black = m;
   no_black.black_level.reset();

@@ -32,7 +32,12 @@
 //                 0.01 where that key is missing, as MicaSense's library assumes). Left out, with the
 //                 reason in `irradiance_problem`, for a RedEdge / RedEdge-M before firmware 5.1.7 and
 //                 an Altum before 1.2.3 (Exif.Image.Model, Exif.Image.Software), whose firmware
-//                 wrote it wrongly
+//                 wrote it wrongly; in DJI files (Mavic 3M, P4 Multispectral) the sunlight sensor's
+//                 reading of this band, in its own units: Xmp.drone-dji.Irradiance, else
+//                 Xmp.Camera.Irradiance (DJI's guides: "solar irradiance value after compensation")
+//   band factor   Xmp.drone-dji.SensorGainAdjustment (DJI: the band camera's sensitivity relative
+//                 to DJI's reference module, which the image is multiplied by before it is divided
+//                 by the sunlight sensor's reading)
 //   panel         Xmp.Camera.CalibrationPicture (Pix4D's tag, which MicaSense writes: 0 a flight
 //                 image, 1 a picture of a calibration panel the camera could not read, 2 one it read;
 //                 a Sequoia writes 1 and 2 for any panel picture), Xmp.Camera.Albedo (the panel's
@@ -88,8 +93,14 @@ struct CaptureMeta {
   /// MicaSense's a1: radiance (W/m^2/sr/nm) = a1 x (DN - black level) / 2^bits / (exposure x gain
   /// x fall-off x row gradient).
   std::optional<double> radiance_a1;
-  /// The light sensor's spectral irradiance on a level surface at the capture (W/m^2/nm).
+  /// The light sensor's reading of the sunlight at the capture, in this band: MicaSense's DLS 2
+  /// spectral irradiance on a level surface in W/m^2/nm (`irradiance_si`), or DJI's sunlight
+  /// sensor in its own units.
   std::optional<double> irradiance;
+  bool irradiance_si = false;
+  /// DJI's SensorGainAdjustment: (DN - black) / 2^bits / (exposure x gain) x this / the sunlight
+  /// sensor's reading is reflectance up to one factor common to every band (DJI's guides).
+  std::optional<double> gain_adjustment;
   /// Why an irradiance the file holds was not taken (a firmware known to write it wrongly).
   std::string irradiance_problem;
   /// Xmp.Camera.CalibrationPicture: 0 a flight image, 1 a panel picture the camera could not
@@ -136,7 +147,8 @@ inline const std::vector<std::string>& exiv2_metadata_keys() {
       "Xmp.Camera.VignettingPolynomial2D", "Xmp.Camera.VignettingPolynomial2DName",
       "Xmp.MicaSense.RadiometricCalibration", "Xmp.Camera.HorizontalIrradiance", "Xmp.DLS.HorizontalIrradiance",
       "Xmp.Camera.IrradianceScaleToSIUnits", "Exif.Image.Model", "Exif.Image.Software", "Xmp.Camera.CalibrationPicture",
-      "Xmp.Camera.Albedo", "Xmp.Camera.ReflectArea", "Xmp.MicaSense.PanelSerial", "Xmp.Camera.PanelSerial"};
+      "Xmp.Camera.Albedo", "Xmp.Camera.ReflectArea", "Xmp.MicaSense.PanelSerial", "Xmp.Camera.PanelSerial",
+      "Xmp.drone-dji.Irradiance", "Xmp.Camera.Irradiance", "Xmp.drone-dji.SensorGainAdjustment"};
   return keys;
 }
 
@@ -502,8 +514,24 @@ inline CaptureMeta capture_meta_from_exiv2(const std::map<std::string, std::stri
                                  ") wrote HorizontalIrradiance wrongly");
     } else if (h > 0) {
       m.irradiance = h * scale;
+      m.irradiance_si = true;
       m.source["irradiance"] = e->first;
     }
+  } else if (dji) {
+    // (MicaSense's Camera:Irradiance is the reading facing the sky, not the level-surface value.)
+    if (auto d = first({"Xmp.drone-dji.Irradiance", "Xmp.Camera.Irradiance"})) {
+      // A zero: no sunlight sensor on the drone, or no reading; no error.
+      const double h = number(*d, "a sunlight-sensor reading (>= 0)", false);
+      if (h < 0) bad(*d, "a sunlight-sensor reading (>= 0)");
+      if (h > 0) {
+        m.irradiance = h;
+        m.source["irradiance"] = d->first;
+      }
+    }
+  }
+  if (auto e = first({"Xmp.drone-dji.SensorGainAdjustment"})) {
+    m.gain_adjustment = number(*e, "a gain adjustment factor (> 0)", true);
+    m.source["gain_adjustment"] = e->first;
   }
   if (auto e = first({"Xmp.Camera.CalibrationPicture"})) {
     const double c = number(*e, "0, 1 or 2 (not a panel, an unread panel, a read one)", false);

@@ -27,6 +27,13 @@
 // pictures, E is their mean. `--radiometry panel+dls` (MicaSense's tutorial 3) keeps the light
 // sensor for the changes of the sunlight during the flight and lets the panel set its level: the
 // response then includes the DLS 2 irradiance of each picture, the panel's and the flight's.
+// DJI's sunlight sensor takes the DLS 2's place there, in its own units.
+//
+// Reflectance up to one factor common to all bands (`--radiometry sun-sensor`, as DJI's image
+// processing guides compute NDVI from the sunlight sensor): every image is divided by its light
+// sensor's reading and multiplied by the band camera's calibration (DJI's SensorGainAdjustment,
+// MicaSense's pi a1), and one scale for all bands then maps the brightest value of any band to 1.
+// Band ratios and normalised differences are those of reflectance; the level is not.
 #pragma once
 
 #include <algorithm>
@@ -63,8 +70,9 @@ struct FrameRadiometry {
   std::vector<std::array<int, 2>> vignetting_exp2d;  ///< their exponents of x / width and y / height
   int width = 0, height = 0;  ///< the image's size, which the 2-D model's coordinates are divided by
   double row_a2 = 0.0, row_a3 = 0.0;  ///< MicaSense's row gradient (used when steps.row_gradient)
-  double irradiance = 1.0;            ///< W/m^2/nm (used when steps.irradiance)
+  double irradiance = 1.0;            ///< the light sensor's reading (used when steps.irradiance)
   double radiance_a1 = 0.0;           ///< MicaSense's a1 (reflectance only)
+  double gain_adjustment = 0.0;       ///< DJI's SensorGainAdjustment (sun-sensor only)
   double scale = 1.0;  ///< common factor of the band; for reflectance pi a1 / 2^bits
 };
 
@@ -73,7 +81,10 @@ enum class Calibration {
   relative,              ///< relative radiance: one factor per band, its brightest value 1
   sun_sensor,            ///< reflectance from MicaSense's a1 and the DLS 2 irradiance
   panel,                 ///< reflectance from calibration-panel pictures: one irradiance per band
-  panel_and_sun_sensor,  ///< the panel sets the DLS 2 irradiance's level, which follows the light
+  panel_and_sun_sensor,  ///< the panel sets the light sensor's level, which follows the light
+  /// reflectance up to one factor common to all bands: the light sensor's reading and the band
+  /// camera's calibration (DJI's SensorGainAdjustment or MicaSense's a1), one scale for all bands
+  sun_sensor_relative,
 };
 
 /// What plan_band decided for a band, with the reasons.
@@ -87,8 +98,10 @@ struct BandPlan {
 /// (black level; exposure time; gain or ISO; vignetting polynomial and centre). Reflectance needs
 /// every step (MicaSense's row gradient wherever the camera writes it, always for the light
 /// sensor's; a panel's calibration takes a camera that writes no black level at all), MicaSense's
-/// a1 for the light sensor's, and the irradiance in every image where the light sensor takes part:
-/// `missing` then lists what the caller must refuse.
+/// a1 and the DLS 2's W/m^2/nm for the light sensor's (the band camera's calibration, a1 or DJI's
+/// SensorGainAdjustment, and the reading in any unit for sun_sensor_relative), and the light
+/// sensor's reading in every image where it takes part: `missing` then lists what the caller must
+/// refuse.
 inline BandPlan plan_band(const std::vector<CaptureMeta>& metas, const std::vector<std::filesystem::path>& files,
                           Calibration calibration = Calibration::relative) {
   BandPlan plan;
@@ -99,7 +112,8 @@ inline BandPlan plan_band(const std::vector<CaptureMeta>& metas, const std::vect
     if (!lacking.empty()) plan.missing[tag] = std::move(lacking);
     return plan.missing.count(tag) == 0 && !metas.empty();
   };
-  const bool sun = calibration == Calibration::sun_sensor || calibration == Calibration::panel_and_sun_sensor;
+  const bool sun = calibration == Calibration::sun_sensor || calibration == Calibration::panel_and_sun_sensor ||
+                   calibration == Calibration::sun_sensor_relative;
   const bool panel = calibration == Calibration::panel || calibration == Calibration::panel_and_sun_sensor;
   // A camera that writes no black level anywhere (the Parrot Sequoia) has none to subtract, which
   // a panel calibration can live with.
@@ -115,12 +129,26 @@ inline BandPlan plan_band(const std::vector<CaptureMeta>& metas, const std::vect
     plan.steps.row_gradient =
         check("row gradient (MicaSense RadiometricCalibration)", [](const CaptureMeta& m) { return m.row_gradient.has_value(); }) &&
         plan.steps.exposure;
-  if (calibration == Calibration::sun_sensor)
+  if (calibration == Calibration::sun_sensor) {
     check("radiance calibration a1 (MicaSense RadiometricCalibration)",
           [](const CaptureMeta& m) { return m.radiance_a1.has_value(); });
+    plan.steps.irradiance = check("horizontal irradiance (MicaSense DLS 2)",
+                                  [](const CaptureMeta& m) { return m.irradiance.has_value() && m.irradiance_si; });
+    return plan;
+  }
+  if (calibration == Calibration::sun_sensor_relative) {
+    // One kind of band calibration for the whole band: a1 everywhere, or SensorGainAdjustment.
+    const bool a1 = !metas.empty() && metas[0].radiance_a1.has_value();
+    if (a1)
+      check("radiance calibration a1 (MicaSense RadiometricCalibration)",
+            [](const CaptureMeta& m) { return m.radiance_a1.has_value(); });
+    else
+      check("band calibration (DJI SensorGainAdjustment, MicaSense RadiometricCalibration)",
+            [](const CaptureMeta& m) { return m.gain_adjustment.has_value() && !m.radiance_a1.has_value(); });
+  }
   if (sun)
-    plan.steps.irradiance =
-        check("horizontal irradiance (MicaSense DLS 2)", [](const CaptureMeta& m) { return m.irradiance.has_value(); });
+    plan.steps.irradiance = check("light sensor reading (MicaSense DLS 2 HorizontalIrradiance, DJI Irradiance)",
+                                  [](const CaptureMeta& m) { return m.irradiance.has_value(); });
   return plan;
 }
 
@@ -151,6 +179,7 @@ inline FrameRadiometry frame_radiometry(const CaptureMeta& m, const RadiometrySt
   }
   if (steps.irradiance) r.irradiance = *m.irradiance;
   if (m.radiance_a1) r.radiance_a1 = *m.radiance_a1;
+  if (m.gain_adjustment) r.gain_adjustment = *m.gain_adjustment;
   return r;
 }
 
@@ -158,6 +187,14 @@ inline FrameRadiometry frame_radiometry(const CaptureMeta& m, const RadiometrySt
 /// with 2^bits = dn_max + 1 (65536 for 16-bit files, as MicaSense's library divides).
 inline double reflectance_scale(const FrameRadiometry& r) {
   return std::numbers::pi * r.radiance_a1 / (r.dn_max + 1.0);
+}
+
+/// The factor that turns (DN - black level) / sensor_response, the light sensor's reading included,
+/// into reflectance up to a factor common to every band: pi a1 / 2^bits from MicaSense's a1,
+/// SensorGainAdjustment / 2^bits from DJI's (0 without either).
+inline double light_sensor_scale(const FrameRadiometry& r) {
+  if (r.radiance_a1 > 0) return reflectance_scale(r);
+  return r.gain_adjustment > 0 ? r.gain_adjustment / (r.dn_max + 1.0) : 0.0;
 }
 
 /// The irradiance (W/m^2/nm) under which a reflectance image `r` was computed, from MicaSense's a1:
@@ -245,7 +282,7 @@ inline void check_radiometry(const FrameRadiometry& r, int width, int height, co
     fail(file, cat("radiometric parameters out of range (black level ", r.black_level, ", exposure ", r.exposure_s,
                    " s, gain ", r.gain, ", scale ", r.scale, ")"));
   if (r.steps.irradiance && (!(r.irradiance > 0) || !std::isfinite(r.irradiance * r.exposure_s * r.gain)))
-    fail(file, cat("irradiance ", r.irradiance, " W/m^2/nm out of range (expected > 0;",
+    fail(file, cat("light sensor reading ", r.irradiance, " out of range (expected > 0;",
                    " --radiometry auto gives relative radiance without it)"));
   // The row gradient is linear in y: positive at the first and last row means positive on all.
   for (const double y : {0.0, double(height - 1)}) {

@@ -27,7 +27,11 @@
 //              drone-dji:VignettingData (a correction polynomial that multiplies the image),
 //              drone-dji:CalibratedOpticalCenterX/Y, the same correction again as
 //              Camera:VignettingPolynomial + Camera:VignettingCenter, exif:ExposureTime,
-//              exif:FocalLength, exif:FocalPlane*.
+//              exif:FocalLength, exif:FocalPlane*, and the sunlight sensor as DJI's guides use it:
+//              drone-dji:SensorGainAdjustment (dji_gain_adjustment) and drone-dji:Irradiance, such
+//              that (DN - black) / 2^16 / (exposure gain) x vignetting correction x
+//              SensorGainAdjustment / Irradiance is kDjiReflectanceFactor x the scene's values in
+//              every band.
 //   sequoia    IMG_<yymmdd>_<hhmmss>_0001_GRE.TIF, _RED, _REG, _NIR, and _RGB.JPG. Like the real
 //              camera: no black level (DN = radiance x ...), and the vignetting as a 2-D fall-off
 //              polynomial in x / width and y / height (Camera:VignettingPolynomial2D, its exponents
@@ -83,10 +87,10 @@ struct RawOptions {
   int captures = 0;   ///< number of captures (0: the preset's)
   int width = 0;      ///< multispectral image width (0: the preset's); height 3/4 of it, RGB 1.5x
   /// The sunlight of each capture is 1 +- this (uniform, the same for every band of a capture),
-  /// as under passing clouds; 0 keeps it steady. The MicaSense light sensor records it.
+  /// as under passing clouds; 0 keeps it steady. The light sensors of MicaSense and DJI record it.
   double light_variation = 0.0;
-  /// The MicaSense light sensor reads (1 + this) x the sunlight (a calibration or mounting error,
-  /// which a calibration panel takes out); -0.5 .. 1.
+  /// The light sensor reads (1 + this) x the sunlight (a calibration or mounting error, which a
+  /// calibration panel takes out); -0.5 .. 1.
   double dls_bias = 0.0;
   /// Captures of a calibration panel after the flight's.
   int panel_captures = 0;
@@ -178,6 +182,17 @@ inline double raw_irradiance(double nm) { return 1.45 - 0.0006 * (nm - 475.0); }
 /// The reflectance of the synthetic calibration panel at wavelength `nm` (MicaSense's panels are
 /// about 0.49 to 0.53 from blue to near infra-red).
 inline double raw_panel_albedo(double nm) { return 0.49 + 0.04 * (nm - 475.0) / 400.0; }
+
+/// DJI's SensorGainAdjustment of the synthetic bands (green, red, red edge, NIR): a few percent
+/// apart, as real Mavic 3M files carry them.
+inline double dji_gain_adjustment(std::size_t band_index) {
+  constexpr double k[] = {1.0, 1.0, 0.985, 1.033, 1.005};  // by index in raw_bands("dji"); 0 is RGB
+  return band_index < std::size(k) ? k[band_index] : 1.0;
+}
+
+/// What DJI's reflectance formula gives for a surface of reflectance 1 in the synthetic DJI sets
+/// (the unknown factor common to all bands in DJI's guides).
+inline constexpr double kDjiReflectanceFactor = 0.01;
 
 /// The sunlight of capture `capture` relative to the steady sky: 1 + variation x U(-1, 1).
 inline double raw_light(std::uint64_t seed, int capture, double variation) {
@@ -485,6 +500,12 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
         attrs.emplace_back("drone-dji:VignettingData", kv);
         attrs.emplace_back("drone-dji:CalibratedOpticalCenterX", detail::g10(vcx));
         attrs.emplace_back("drone-dji:CalibratedOpticalCenterY", detail::g10(vcy));
+        // (DN - black) / 2^16 / (exposure gain fall-off) = value x sensitivity x light / 2^16, so
+        // this reading makes DJI's ratio kDjiReflectanceFactor x value in every band.
+        const double adjustment = dji_gain_adjustment(bi);
+        attrs.emplace_back("drone-dji:SensorGainAdjustment", detail::g10(adjustment));
+        attrs.emplace_back("drone-dji:Irradiance", detail::g10(b.sensitivity * adjustment * light * (1.0 + opt.dls_bias) /
+                                                               (65536.0 * kDjiReflectanceFactor)));
       } else {
         elems.emplace_back("exif:ISOSpeedRatings", detail::rdf_seq({double(e.iso)}));
         if (black) attrs.emplace_back("Camera:BlackLevel", detail::g10(black_level));
