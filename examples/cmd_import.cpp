@@ -48,7 +48,7 @@ using msgs::io::cat;
 using msgs::io::fail;
 
 constexpr const char* kUsage =
-    "usage: msgs import --images DIR --out DIR [--camera auto|micasense|dji|sequoia]\n"
+    "usage: msgs import --images DIR --out DIR [--camera auto|micasense|dji|p4m|sequoia]\n"
     "                   [--bands PATTERN=ID,...] [--eval-every N] [--camera-model M]\n"
     "                   [--radiometry auto|none|reflectance|sun-sensor|panel|panel+dls]\n"
     "                   [--panel-albedo A]\n"
@@ -63,7 +63,8 @@ constexpr const char* kUsage =
     "\n"
     "  1. Captures and bands from the file names: MicaSense RedEdge/Altum IMG_0001_1.tif.._5.tif\n"
     "     (1 Blue, 2 Green, 3 Red, 4 NIR, 5 RedEdge), DJI Mavic 3M DJI_<datetime>_0001_MS_G.TIF,\n"
-    "     _MS_R, _MS_RE, _MS_NIR, _D.JPG, Parrot Sequoia IMG_<date>_<time>_0001_GRE.TIF, _RED, _REG,\n"
+    "     _MS_R, _MS_RE, _MS_NIR, _D.JPG, DJI P4 Multispectral DJI_0010.JPG (RGB), DJI_0011.TIF (Blue)\n"
+    "     .. DJI_0015.TIF (NIR), Parrot Sequoia IMG_<date>_<time>_0001_GRE.TIF, _RED, _REG,\n"
     "     _NIR, _RGB.JPG. Bands msgs has no slot for (blue, thermal) are skipped with a warning.\n"
     "     A central wavelength in the metadata that does not fit the slot (green 490-600 nm, red\n"
     "     600-700, red edge 690-760, NIR 760-1000) stops the import, naming the file.\n"
@@ -102,7 +103,7 @@ constexpr const char* kUsage =
     "  --images DIR        folder of captures (searched recursively)\n"
     "  --out DIR           output dataset folder (must not exist unless --force)\n"
     "  --camera C          file-name scheme: auto (default: the one that matches most files),\n"
-    "                      micasense, dji, sequoia\n"
+    "                      micasense, dji (Mavic 3M), p4m (P4 Multispectral), sequoia\n"
     "  --bands LIST        explicit patterns instead: PATTERN=ID,... with * and ? wildcards matching\n"
     "                      the capture number, ID one of D, MS_G, MS_R, MS_RE, MS_NIR or skip,\n"
     "                      e.g. --bands 'IMG_*_2.tif=MS_G,IMG_*_3.tif=MS_R,IMG_*_5.tif=MS_RE,IMG_*_4.tif=MS_NIR'\n"
@@ -784,8 +785,8 @@ int run_import(const std::vector<std::string>& argv) {
   fs::path out = fs::absolute(args.require("out")).lexically_normal();
   if (out.filename().empty()) out = out.parent_path();
   const std::string camera = args.get("camera", "auto");
-  if (camera != "auto" && camera != "micasense" && camera != "dji" && camera != "sequoia")
-    throw msgs::cli::UsageError("--camera expects auto, micasense, dji or sequoia, got '" + camera + "'");
+  if (camera != "auto" && camera != "micasense" && camera != "dji" && camera != "p4m" && camera != "sequoia")
+    throw msgs::cli::UsageError("--camera expects auto, micasense, dji, p4m or sequoia, got '" + camera + "'");
   std::vector<msgs::io::BandPattern> patterns;
   if (args.has("bands")) {
     try {

@@ -15,7 +15,7 @@ namespace {
 
 constexpr const char* kUsage =
     "usage: msgs synth --preset tiny|small|medium --out DIR [--seed S] [--force]\n"
-    "       msgs synth --raw micasense|dji|sequoia --out DIR [--preset P] [--captures N] [--width W]\n"
+    "       msgs synth --raw micasense|dji|p4m|sequoia --out DIR [--preset P] [--captures N] [--width W]\n"
     "                  [--light-variation V] [--dls-bias B] [--panel-captures N] [--seed S] [--force]\n"
     "\n"
     "Ray-trace a procedural outdoor scene (lawn, soil, trees, solar panels, pond, painted pad) seen\n"
@@ -29,7 +29,8 @@ constexpr const char* kUsage =
     "\n"
     "With --raw CAMERA, write instead a folder of raw captures as that camera would (input for\n"
     "`msgs import`): its file names (MicaSense IMG_0001_1.tif..._5.tif, DJI Mavic 3M\n"
-    "DJI_<datetime>_0001_MS_G.TIF ... _D.JPG, Parrot Sequoia IMG_<date>_<time>_0001_GRE.TIF ... _RGB.JPG),\n"
+    "DJI_<datetime>_0001_MS_G.TIF ... _D.JPG, DJI P4 Multispectral DJI_0010.JPG, DJI_0011.TIF ...\n"
+    "DJI_0015.TIF, Parrot Sequoia IMG_<date>_<time>_0001_GRE.TIF ... _RGB.JPG),\n"
     "16-bit TIFFs with per-capture exposure time and ISO, black level and vignetting in the digital\n"
     "numbers, and the camera's metadata tags as XMP (band, wavelength, black level, exposure, ISO/gain,\n"
     "vignetting polynomial and centre, focal length and focal-plane resolution; MicaSense files\n"

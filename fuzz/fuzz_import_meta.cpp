@@ -110,7 +110,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     }
   }
   std::vector<std::filesystem::path> files(names.begin(), names.end());
-  for (const char* cam : {"auto", "micasense", "dji", "sequoia"})
+  for (const char* cam : {"auto", "micasense", "dji", "p4m", "sequoia"})
     fuzz::expect_io_error_only("scan_capture_names", [&] { (void)io::scan_capture_names("/fuzz", files, cam); });
   if (!patterns.empty())
     fuzz::expect_io_error_only("scan_capture_names(patterns)",

@@ -45,6 +45,21 @@ TEST_CASE("capture names: DJI Mavic 3M and Parrot Sequoia") {
                            "DJI_20240601100002_0002_MS_G.png"})
     CHECK_MESSAGE(!match_camera_name("dji", junk), junk);
 
+  // P4 Multispectral: a run of ten numbers per capture, the last digit the band.
+  const auto p = match_camera_name("p4m", "DJI_0123.TIF");
+  REQUIRE(p);
+  CHECK(p->band == "MS_R");
+  CHECK(p->capture == "DJI_012");
+  CHECK(match_camera_name("p4m", "DJI_0120.JPG")->band == "D");
+  CHECK(match_camera_name("p4m", "dji_0125.tif")->band == "MS_NIR");
+  CHECK(match_camera_name("p4m", "DJI_0124.TIF")->band == "MS_RE");
+  CHECK(match_camera_name("p4m", "DJI_0121.TIF")->band.empty());  // blue: skipped
+  CHECK(match_camera_name("p4m", "DJI_0121.TIF")->camera_band == "Blue");
+  for (const char* junk : {"DJI_0126.TIF", "DJI_0120.TIF", "DJI_0123.JPG", "DJI_012.TIF", "DJI_01230.TIF", "DJI_01a3.TIF",
+                           "DJI_20240601100002_0002_MS_G.TIF", "IMG_0123.TIF", "DJI_0123.png"})
+    CHECK_MESSAGE(!match_camera_name("p4m", junk), junk);
+  CHECK(!match_camera_name("dji", "DJI_0123.TIF"));
+
   const auto s = match_camera_name("sequoia", "IMG_240601_100004_0003_REG.TIF");
   REQUIRE(s);
   CHECK(s->band == "MS_RE");
@@ -112,6 +127,13 @@ TEST_CASE("capture names: scanning a folder listing groups captures and refuses 
   const CaptureScan d = scan_capture_names("/d", {"DJI_20240601100000_0001_MS_G.TIF", "DJI_20240601100000_0001_D.JPG"}, "auto");
   CHECK(d.camera == "dji");
   CHECK(d.captures.size() == 1);
+  const CaptureScan p4 = scan_capture_names("/p", {"DJI_0010.JPG", "DJI_0011.TIF", "DJI_0012.TIF", "DJI_0013.TIF",
+                                                   "DJI_0014.TIF", "DJI_0015.TIF", "DJI_0022.TIF"}, "auto");
+  CHECK(p4.camera == "p4m");
+  REQUIRE(p4.captures.size() == 2);
+  CHECK(p4.captures[0].bands.size() == 5);
+  CHECK(p4.captures[1].bands.at("MS_G") == fs::path("DJI_0022.TIF"));
+  CHECK(p4.skipped.at("Blue").size() == 1);
   const CaptureScan e = scan_capture_names("/e", {"a_1_g.tif", "a_1_r.tif", "a_2_g.tif"}, "auto",
                                            parse_band_patterns("a_*_g.tif=MS_G,a_*_r.tif=MS_R"));
   CHECK(e.camera == "patterns");

@@ -7,6 +7,7 @@
 
 #include <msgs/io/bands.hpp>
 #include <msgs/io/capture_meta.hpp>
+#include <msgs/io/capture_names.hpp>
 #include <msgs/io/dataset.hpp>
 #include <msgs/io/image_io.hpp>
 #include <msgs/io/match_pairs.hpp>
@@ -293,6 +294,33 @@ TEST_CASE("synth --raw: deterministic bytes, camera file names, metadata exiv2 r
   CHECK(d.vignetting_kind == msgs::io::VignettingKind::correction);
   CHECK(d.source.at("vignetting") == "Xmp.drone-dji.VignettingData");
   CHECK(d.has_vignetting());
+  CHECK(*d.gain_adjustment == 1.0);  // green
+  CHECK(d.source.at("irradiance") == "Xmp.drone-dji.Irradiance");
+  CHECK(!d.irradiance_si);
+
+  // P4 Multispectral: its file names, and its black level under drone-dji:BlackLevel.
+  msgs::synth::RawOptions p4m = dji;
+  p4m.camera = "p4m";
+  msgs::synth::write_synthetic_raw(dir / "p4m", p4m);
+  const auto p4m_bands = msgs::synth::raw_bands("p4m");
+  REQUIRE(p4m_bands.size() == 6);
+  CHECK(msgs::synth::raw_file_name("p4m", p4m_bands[0], 0) == "DJI_0010.JPG");
+  CHECK(msgs::synth::raw_file_name("p4m", p4m_bands[5], 11) == "DJI_0125.TIF");
+  const fs::path nir = dir / "p4m" / msgs::synth::raw_file_name("p4m", p4m_bands[5], 0);
+  REQUIRE(run("exiv2 -q -P kv '" + nir.string() + "'", dir / "exiv2_p4m.txt") == 0);
+  const msgs::io::CaptureMeta p4 = msgs::io::parse_capture_meta(slurp(dir / "exiv2_p4m.txt"), nir);
+  CHECK(*p4.black_level == 4096);
+  CHECK(p4.source.at("black_level") == "Xmp.drone-dji.BlackLevel");
+  CHECK(p4.vignetting_kind == msgs::io::VignettingKind::correction);
+  CHECK(*p4.gain_adjustment == 1.005);
+  CHECK(*p4.wavelength_nm == 840);
+  std::vector<fs::path> p4m_files;
+  for (const auto& b : p4m_bands) p4m_files.emplace_back(msgs::synth::raw_file_name("p4m", b, 0));
+  for (const auto& name : p4m_files) CHECK(fs::exists(dir / "p4m" / name));
+  const msgs::io::CaptureScan p4_scan = msgs::io::scan_capture_names(dir / "p4m", p4m_files, "auto");
+  CHECK(p4_scan.camera == "p4m");
+  REQUIRE(p4_scan.captures.size() == 1);
+  CHECK(p4_scan.captures[0].bands.size() == 5);
 
   // Sequoia: the 2-D fall-off polynomial, read back through exiv2 and divided out. Against the
   // radiance the scene rendered, the raw corners are 0.7 of the centre and the normalised ones 1.

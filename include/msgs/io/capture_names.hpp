@@ -1,7 +1,8 @@
 // include/msgs/io/capture_names.hpp
 // Recognising multi-band captures from file names: which files belong to one capture (one trigger
 // of the multi-lens camera) and which band each file holds, for the naming schemes of MicaSense
-// RedEdge/Altum, DJI Mavic 3M and Parrot Sequoia, or for explicit user patterns ("IMG_*_2.tif=MS_G").
+// RedEdge/Altum, DJI Mavic 3M, DJI P4 Multispectral and Parrot Sequoia, or for explicit user
+// patterns ("IMG_*_2.tif=MS_G").
 // Pure string work (no file access), so odd names of any kind give a clear answer, never a crash.
 #pragma once
 
@@ -38,7 +39,7 @@ struct BandPattern {
 
 /// The built-in camera naming schemes.
 inline const std::vector<std::string>& known_cameras() {
-  static const std::vector<std::string> c = {"micasense", "dji", "sequoia"};
+  static const std::vector<std::string> c = {"micasense", "dji", "p4m", "sequoia"};
   return c;
 }
 
@@ -48,6 +49,8 @@ inline std::string camera_pattern_text(std::string_view camera) {
     return "MicaSense RedEdge/Altum: IMG_<nnnn>_<1..10>.tif (1 Blue, 2 Green, 3 Red, 4 NIR, 5 RedEdge)";
   if (camera == "dji")
     return "DJI Mavic 3M: DJI_<yyyymmddhhmmss>_<nnnn>_<D|MS_G|MS_R|MS_RE|MS_NIR>.JPG/.TIF";
+  if (camera == "p4m")
+    return "DJI P4 Multispectral: DJI_<nnn><0..5>.JPG/.TIF (0 RGB, 1 Blue, 2 Green, 3 Red, 4 RedEdge, 5 NIR)";
   if (camera == "sequoia")
     return "Parrot Sequoia: IMG_<yymmdd>_<hhmmss>_<nnnn>_<GRE|RED|REG|NIR|RGB>.TIF/.JPG";
   return std::string(camera);
@@ -144,6 +147,28 @@ inline std::optional<NameMatch> match_dji(std::string_view name) {
   return m;
 }
 
+/// DJI P4 Multispectral: one capture is six files numbered in a run of ten, DJI_0010.JPG (RGB),
+/// DJI_0011.TIF (blue) .. DJI_0015.TIF (NIR), the next DJI_0020.JPG ..: the last digit is the band.
+inline std::optional<NameMatch> match_dji_p4m(std::string_view name) {
+  std::string_view stem;
+  std::string ext;
+  stem_ext(name, stem, ext);
+  const bool tiff = is_tiff_ext(ext);
+  if (!tiff && !is_jpeg_ext(ext)) return std::nullopt;
+  const auto parts = split_underscore(stem);
+  if (parts.size() != 2 || !iequal(parts[0], "DJI") || parts[1].size() != 4 || !all_digits(parts[1]))
+    return std::nullopt;
+  const int band = parts[1][3] - '0';
+  if (band > 5 || (band == 0) == tiff) return std::nullopt;  // the RGB image is the JPEG, the others TIFFs
+  static const char* names[] = {"RGB", "Blue", "Green", "Red", "RedEdge", "NIR"};
+  static const char* ids[] = {"D", "", "MS_G", "MS_R", "MS_RE", "MS_NIR"};
+  NameMatch m;
+  m.capture = cat("DJI_", std::string(parts[1].substr(0, 3)));
+  m.camera_band = names[band];
+  m.band = ids[band];
+  return m;
+}
+
 inline std::optional<NameMatch> match_sequoia(std::string_view name) {
   std::string_view stem;
   std::string ext;
@@ -174,8 +199,9 @@ inline std::optional<NameMatch> match_sequoia(std::string_view name) {
 inline std::optional<NameMatch> match_camera_name(std::string_view camera, std::string_view file_name) {
   if (camera == "micasense") return detail::match_micasense(file_name);
   if (camera == "dji") return detail::match_dji(file_name);
+  if (camera == "p4m") return detail::match_dji_p4m(file_name);
   if (camera == "sequoia") return detail::match_sequoia(file_name);
-  throw std::invalid_argument(cat("unknown camera '", std::string(camera), "' (expected auto, micasense, dji or sequoia)"));
+  throw std::invalid_argument(cat("unknown camera '", std::string(camera), "' (expected auto, micasense, dji, p4m or sequoia)"));
 }
 
 /// Case-insensitive glob match of `name` against `pattern` (`*` any run of characters, `?` one).
@@ -269,7 +295,7 @@ struct CaptureFiles {
 
 /// The result of scanning a folder's file names.
 struct CaptureScan {
-  std::string camera;                   ///< micasense | dji | sequoia | patterns
+  std::string camera;                   ///< micasense | dji | p4m | sequoia | patterns
   std::vector<CaptureFiles> captures;   ///< sorted by key
   /// Files of bands msgs has no slot for, by the camera's band name.
   std::map<std::string, std::vector<std::filesystem::path>> skipped;
@@ -286,7 +312,7 @@ struct CaptureScan {
 };
 
 /// Group `files` (paths relative to `root`, as found by a directory scan) into captures.
-/// `camera`: "auto" (the built-in scheme that recognises most files), "micasense", "dji",
+/// `camera`: "auto" (the built-in scheme that recognises most files), "micasense", "dji", "p4m",
 /// "sequoia"; ignored when `patterns` is not empty. Throws IoError (naming `root`) when nothing is
 /// recognised, saying which patterns were tried, and when two files claim the same band of the same
 /// capture; std::invalid_argument for an unknown camera name.

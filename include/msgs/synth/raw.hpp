@@ -32,6 +32,9 @@
 //              that (DN - black) / 2^16 / (exposure gain) x vignetting correction x
 //              SensorGainAdjustment / Irradiance is kDjiReflectanceFactor x the scene's values in
 //              every band.
+//   p4m        DJI_0010.JPG (RGB), DJI_0011.TIF (blue) .. DJI_0015.TIF (NIR), DJI_0020.JPG .., as a
+//              P4 Multispectral numbers them; its tags as the Mavic 3M's, but the black level as
+//              drone-dji:BlackLevel (4096).
 //   sequoia    IMG_<yymmdd>_<hhmmss>_0001_GRE.TIF, _RED, _REG, _NIR, and _RGB.JPG. Like the real
 //              camera: no black level (DN = radiance x ...), and the vignetting as a 2-D fall-off
 //              polynomial in x / width and y / height (Camera:VignettingPolynomial2D, its exponents
@@ -81,7 +84,7 @@ namespace msgs::synth {
 
 /// What to generate.
 struct RawOptions {
-  std::string camera = "micasense";  ///< micasense | dji | sequoia
+  std::string camera = "micasense";  ///< micasense | dji | p4m | sequoia
   std::string preset = "tiny";       ///< scene, flight and image sizes (see synth_presets)
   std::uint64_t seed = 1;
   int captures = 0;   ///< number of captures (0: the preset's)
@@ -135,13 +138,20 @@ inline std::vector<RawBand> raw_bands(std::string_view camera) {
             {"MS_R", "Red", 650, 16, 4, Band::MS_R, false, 1.15e7},
             {"MS_RE", "RedEdge", 730, 16, 5, Band::MS_RE, false, 0.90e7},
             {"MS_NIR", "NIR", 860, 26, 6, Band::MS_NIR, false, 0.80e7}};
+  if (camera == "p4m")
+    return {{"0", "RGB", 0, 0, 0, Band::D, true, 0},
+            {"1", "Blue", 450, 16, 2, Band::D, false, 1.10e7},
+            {"2", "Green", 560, 16, 3, Band::MS_G, false, 1.00e7},
+            {"3", "Red", 650, 16, 4, Band::MS_R, false, 1.15e7},
+            {"4", "RedEdge", 730, 16, 5, Band::MS_RE, false, 0.90e7},
+            {"5", "NIR", 840, 26, 6, Band::MS_NIR, false, 0.80e7}};
   if (camera == "sequoia")
     return {{"GRE", "Green", 550, 40, 3, Band::MS_G, false, 1.00e7},
             {"RED", "Red", 660, 40, 4, Band::MS_R, false, 1.10e7},
             {"REG", "Red edge", 735, 10, 5, Band::MS_RE, false, 0.90e7},
             {"NIR", "NIR", 790, 40, 6, Band::MS_NIR, false, 0.85e7},
             {"RGB", "RGB", 0, 0, 0, Band::D, true, 0}};
-  throw std::invalid_argument("unknown raw camera '" + std::string(camera) + "' (expected micasense, dji or sequoia)");
+  throw std::invalid_argument("unknown raw camera '" + std::string(camera) + "' (expected micasense, dji, p4m or sequoia)");
 }
 
 /// File name of band `b` of capture `capture` (0-based) as `camera` names it.
@@ -153,6 +163,7 @@ inline std::string raw_file_name(std::string_view camera, const RawBand& b, int 
   if (camera == "micasense") std::snprintf(buf, sizeof buf, "IMG_%04d_%s.tif", n, b.name_part);
   else if (camera == "dji")
     std::snprintf(buf, sizeof buf, "DJI_20240601%02d%02d%02d_%04d_%s.%s", hh, mm, ss, n, b.name_part, b.rgb ? "JPG" : "TIF");
+  else if (camera == "p4m") std::snprintf(buf, sizeof buf, "DJI_%03d%s.%s", n % 1000, b.name_part, b.rgb ? "JPG" : "TIF");
   else std::snprintf(buf, sizeof buf, "IMG_240601_%02d%02d%02d_%04d_%s.%s", hh, mm, ss, n, b.name_part, b.rgb ? "JPG" : "TIF");
   return buf;
 }
@@ -183,11 +194,13 @@ inline double raw_irradiance(double nm) { return 1.45 - 0.0006 * (nm - 475.0); }
 /// about 0.49 to 0.53 from blue to near infra-red).
 inline double raw_panel_albedo(double nm) { return 0.49 + 0.04 * (nm - 475.0) / 400.0; }
 
-/// DJI's SensorGainAdjustment of the synthetic bands (green, red, red edge, NIR): a few percent
-/// apart, as real Mavic 3M files carry them.
-inline double dji_gain_adjustment(std::size_t band_index) {
-  constexpr double k[] = {1.0, 1.0, 0.985, 1.033, 1.005};  // by index in raw_bands("dji"); 0 is RGB
-  return band_index < std::size(k) ? k[band_index] : 1.0;
+/// Does `camera` write DJI's tags (drone-dji namespace, a vignetting correction)?
+inline bool dji_camera(std::string_view camera) { return camera == "dji" || camera == "p4m"; }
+
+/// DJI's SensorGainAdjustment of a synthetic band: a few percent apart, as real files carry them.
+inline double dji_gain_adjustment(const RawBand& b) {
+  const std::string_view n = b.band_name;
+  return n == "Blue" ? 0.991 : n == "Red" ? 0.985 : n == "RedEdge" ? 1.033 : n == "NIR" ? 1.005 : 1.0;
 }
 
 /// What DJI's reflectance formula gives for a surface of reflectance 1 in the synthetic DJI sets
@@ -260,7 +273,7 @@ inline std::string rdf_seq(const std::vector<double>& v) {
 /// with the altitude as a rational. The origin is placed at 51.98 N, 5.66 E, 20 m above sea level.
 inline void add_gps(const std::string& camera, const Vec3f& p, std::vector<std::pair<std::string, std::string>>& attrs) {
   const auto [lat, lon, alt] = io::local_to_gps({double(p.x()), double(p.y()), 20.0 + double(p.z())}, 51.98, 5.66);
-  if (camera == "dji") {
+  if (dji_camera(camera)) {
     attrs.emplace_back("drone-dji:GpsLatitude", g10(lat));
     attrs.emplace_back("drone-dji:GpsLongitude", g10(lon));
     attrs.emplace_back("drone-dji:AbsoluteAltitude", g10(alt));
@@ -401,7 +414,8 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
   // (0.7 in the corners), written out as the camera writes it: coefficients and exponent pairs.
   const std::vector<double> c2d = {0.7, 0.6, 0.6, -0.6, -0.6};
   const std::vector<std::array<int, 2>> e2d = {{0, 0}, {1, 0}, {0, 1}, {2, 0}, {0, 2}};
-  const double black_level = opt.camera == "dji" ? 3200.0 : 4800.0;
+  const bool dji = dji_camera(opt.camera);
+  const double black_level = opt.camera == "dji" ? 3200.0 : opt.camera == "p4m" ? 4096.0 : 4800.0;
   nlohmann::ordered_json panel_list = nlohmann::ordered_json::array();  // panels.json's pictures
   for (int ci = 0; ci < sum.captures + opt.panel_captures; ++ci) {
     const bool panel = ci >= sum.captures;  // a calibration panel's capture, on the ground by the first
@@ -451,7 +465,7 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
       const double rmax = std::hypot(0.5 * cam.width, 0.5 * cam.height);
       // falloff(r) = 1 - 0.30 rho^2 + 0.02 rho^4 (rho = r / rmax); DJI's correction is 1 + 0.3 rho^2 + 0.07 rho^4,
       // whose inverse is the fall-off the sensor sees.
-      const std::vector<double> k = opt.camera == "dji"
+      const std::vector<double> k = dji
                                         ? std::vector<double>{0, 0.30 / (rmax * rmax), 0, 0.07 / std::pow(rmax, 4), 0, 0}
                                         : std::vector<double>{0, -0.30 / (rmax * rmax), 0, 0.02 / std::pow(rmax, 4), 0, 0};
       // The panel as this lens sees it: a little off-centre, differently per band.
@@ -478,7 +492,7 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
             double p = 0.0;
             const double r = std::hypot(x - vcx, y - vcy);
             for (std::size_t i = k.size(); i-- > 0;) p = (p + k[i]) * r;
-            fall = opt.camera == "dji" ? 1.0 / (1.0 + p) : 1.0 + p;
+            fall = dji ? 1.0 / (1.0 + p) : 1.0 + p;
           }
           const double row = micasense ? 1.0 + row_a2 * y / e.exposure_s - row_a3 * y : 1.0;
           const double v = bl + double(L.at(x, y, 0)) * e.exposure_s * e.gain() * fall * row * b.sensitivity * light;
@@ -488,9 +502,9 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
       attrs.emplace_back("Camera:CentralWavelength", detail::g10(b.wavelength_nm));
       attrs.emplace_back("Camera:WavelengthFWHM", detail::g10(b.fwhm_nm));
       attrs.emplace_back("exif:ExposureTime", io::cat("1/", std::lround(1.0 / e.exposure_s)));
-      if (opt.camera == "dji") {
+      if (dji) {
         attrs.emplace_back("drone-dji:ExposureTime", detail::g10(e.exposure_s * 1e6));  // microseconds
-        attrs.emplace_back("Camera:BlackCurrent", detail::g10(black_level));
+        attrs.emplace_back(opt.camera == "p4m" ? "drone-dji:BlackLevel" : "Camera:BlackCurrent", detail::g10(black_level));
         attrs.emplace_back("drone-dji:SensorGain", detail::g10(e.gain()));
         std::string kv;
         for (std::size_t i = 0; i < k.size(); ++i) {
@@ -502,7 +516,7 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
         attrs.emplace_back("drone-dji:CalibratedOpticalCenterY", detail::g10(vcy));
         // (DN - black) / 2^16 / (exposure gain fall-off) = value x sensitivity x light / 2^16, so
         // this reading makes DJI's ratio kDjiReflectanceFactor x value in every band.
-        const double adjustment = dji_gain_adjustment(bi);
+        const double adjustment = dji_gain_adjustment(b);
         attrs.emplace_back("drone-dji:SensorGainAdjustment", detail::g10(adjustment));
         attrs.emplace_back("drone-dji:Irradiance", detail::g10(b.sensitivity * adjustment * light * (1.0 + opt.dls_bias) /
                                                                (65536.0 * kDjiReflectanceFactor)));
