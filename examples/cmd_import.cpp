@@ -253,7 +253,8 @@ std::string radiometry_formula(const msgs::io::FrameRadiometry& r, bool applied,
              " / (dn_max + 1) * one factor for all bands (the brightest value of any band 1)";
     default:
       return "reflectance = " + v + ", scale = 1 / the mean over the band's calibration-panel pictures of the same" +
-             " without scale, averaged over the panel's area and divided by its albedo";
+             " without scale, averaged over the panel's area and divided by its albedo (interpolated linearly in" +
+             " time between sessions of panel pictures taken more than 2 minutes apart)";
   }
 }
 
@@ -338,12 +339,14 @@ std::vector<std::size_t> usable_panels(const std::vector<Item>& panels, const st
   return use;
 }
 
-/// The scale of `band` from its panel pictures `use` (msgs/io/calibration_panel.hpp): 1 / the mean
-/// of their irradiances in the sensor's units. Each picture is logged and appended to `report`.
-double calibrate_with_panels(std::vector<Item>& panels, const std::vector<std::size_t>& use, const std::string& band,
-                             const msgs::io::RadiometrySteps& steps, const std::map<std::string, double>& albedo_arg,
-                             const fs::path& images, nlohmann::ordered_json& report) {
-  double sum = 0.0, lo = 1e300, hi = 0.0;
+/// The irradiance of `band` through the flight from its panel pictures `use`
+/// (msgs/io/calibration_panel.hpp), in the sensor's units: an image's scale is 1 / its value at
+/// the image's time. Each picture is logged and appended to `report`.
+msgs::io::PanelSchedule calibrate_with_panels(std::vector<Item>& panels, const std::vector<std::size_t>& use,
+                                              const std::string& band, const msgs::io::RadiometrySteps& steps,
+                                              const std::map<std::string, double>& albedo_arg, const fs::path& images,
+                                              nlohmann::ordered_json& report) {
+  std::vector<msgs::io::PanelIrradiance> readings;
   for (std::size_t k : use) {
     Item& p = panels[k];
     const fs::path src = images / p.source;
@@ -365,9 +368,7 @@ double calibrate_with_panels(std::vector<Item>& panels, const std::vector<std::s
     const msgs::io::PanelReading reading = msgs::io::read_panel(img.raw, p.rad, *p.meta.panel_area, src);
     const double e = reading.mean / albedo;
     p.rad.scale = 1.0 / e;
-    sum += e;
-    lo = std::min(lo, e);
-    hi = std::max(hi, e);
+    readings.push_back({e, p.meta.time_s});
     const double watts = msgs::io::reflectance_irradiance(p.rad);  // 0 without MicaSense's a1
     std::printf("  %s: panel %s, albedo %.4g (%s), %zu px: %s%s\n", band.c_str(), p.source.generic_string().c_str(),
                 albedo, albedo_from.c_str(), reading.pixels,
@@ -386,17 +387,49 @@ double calibrate_with_panels(std::vector<Item>& panels, const std::vector<std::s
     j["pixels"] = reading.pixels;
     j["saturated_pixels"] = reading.saturated;
     j["mean_response"] = reading.mean;
+    if (p.meta.time_s) j["time_s"] = *p.meta.time_s;
     if (watts > 0) j["irradiance_w_m2_nm"] = watts;
     if (steps.irradiance) j[p.meta.irradiance_si ? "light_sensor_w_m2_nm" : "light_sensor"] = p.rad.irradiance;
     if (!p.meta.panel_serial.empty()) j["panel_serial"] = p.meta.panel_serial;
     report.push_back(j);
   }
-  if (hi > 1.05 * lo)
-    std::printf("  warning: %s: the %zu panel pictures disagree by %.3g%% (%s); their mean is used\n", band.c_str(),
-                use.size(), 100.0 * (hi / lo - 1.0),
-                steps.irradiance ? "after the light sensor's readings: a shaded or tilted panel?"
-                                 : "the light changed between them? --radiometry panel+dls follows it with the light sensor");
-  return double(use.size()) / sum;
+  const msgs::io::PanelSchedule schedule = msgs::io::panel_schedule(readings);
+  // Pictures that should agree (one session, or all of them when there are no sessions in time).
+  std::vector<double> lo(schedule.nodes.size(), 1e300), hi(schedule.nodes.size(), 0.0);
+  for (const auto& r : readings) {
+    std::size_t k = 0;
+    if (schedule.timed())
+      while (k + 1 < schedule.nodes.size() && *r.time_s > 0.5 * (schedule.nodes[k][0] + schedule.nodes[k + 1][0])) ++k;
+    lo[k] = std::min(lo[k], r.e);
+    hi[k] = std::max(hi[k], r.e);
+  }
+  for (std::size_t k = 0; k < lo.size(); ++k)
+    if (hi[k] > 1.05 * lo[k])
+      std::printf("  warning: %s: %s panel pictures disagree by %.3g%% (%s); their mean is used\n", band.c_str(),
+                  schedule.timed() ? "one session's" : cat("the ", use.size()).c_str(), 100.0 * (hi[k] / lo[k] - 1.0),
+                  steps.irradiance ? "after the light sensor's readings: a shaded or tilted panel?"
+                  : schedule.timed()
+                      ? "the light changed between them? --radiometry panel+dls follows it with the light sensor"
+                      : "the light changed between them? Pictures before and after the flight (more than 2 minutes"
+                        " apart, with capture times) are interpolated in time; --radiometry panel+dls follows the"
+                        " light with the light sensor");
+  if (schedule.timed()) {
+    // In W/m^2/nm where MicaSense's a1 gives them, as the pictures above.
+    const double watts_per_unit = msgs::io::reflectance_irradiance(panels[use[0]].rad) * panels[use[0]].rad.scale;
+    std::string nodes;
+    for (const auto& n : schedule.nodes) {
+      const long t = std::lround(n[0]) % 86400;
+      char clock[16];
+      std::snprintf(clock, sizeof clock, "%02ld:%02ld:%02ld", t / 3600, t / 60 % 60, t % 60);
+      nodes += cat(nodes.empty() ? "" : ", ",
+                   watts_per_unit > 0 ? cat(msgs::io::short_number(n[1] * watts_per_unit, 4), " W/m^2/nm")
+                                      : msgs::io::short_number(n[1], 4),
+                   " at ", clock);
+    }
+    std::printf("  %s: the panel's irradiance interpolated in time between %zu sessions (%s)\n", band.c_str(),
+                schedule.nodes.size(), nodes.c_str());
+  }
+  return schedule;
 }
 
 /// A colmap stage with progress, timing, log and the log's tail on failure.
@@ -1094,10 +1127,19 @@ int run_import(const std::vector<std::string>& argv) {
       }
       continue;
     }
-    const double panel_scale =
-        by_panel ? calibrate_with_panels(panels, band_panels, band, steps, panel_albedo, images, panel_report) : 0.0;
+    const msgs::io::PanelSchedule schedule =
+        by_panel ? calibrate_with_panels(panels, band_panels, band, steps, panel_albedo, images, panel_report)
+                 : msgs::io::PanelSchedule{};
+    if (schedule.timed()) {
+      std::vector<std::string> untimed;
+      for (std::size_t i : idx)
+        if (!items[i].meta.time_s) untimed.push_back(items[i].source.generic_string());
+      if (!untimed.empty())
+        std::printf("  warning: %s: %zu images have no capture time (%s): the panel's mean irradiance is used for them\n",
+                    band.c_str(), untimed.size(), list_some(untimed, 3).c_str());
+    }
     for (std::size_t i : idx)
-      items[i].rad.scale = by_panel                    ? panel_scale
+      items[i].rad.scale = by_panel                    ? 1.0 / schedule.at(items[i].meta.time_s)
                            : reflectance                 ? msgs::io::reflectance_scale(items[i].rad)
                            : items[i].radiometry_applied ? msgs::io::band_scale(mx)
                                                          : 1.0 / items[i].rad.dn_max;
@@ -1159,7 +1201,7 @@ int run_import(const std::vector<std::string>& argv) {
                       items[idx[0]].meta.irradiance_si ? " W/m^2/nm" : " (its own units)");
       } else if (lo > 0)
         std::printf("  %s: reflectance under %s W/m^2/nm of sunlight (%s)\n", band.c_str(),
-                    (calibration == msgs::io::Calibration::panel ? msgs::io::short_number(lo, 4)
+                    (calibration == msgs::io::Calibration::panel && hi <= lo * (1 + 1e-9) ? msgs::io::short_number(lo, 4)
                                                                  : cat(msgs::io::short_number(lo, 4), " to ", msgs::io::short_number(hi, 4)))
                         .c_str(),
                     how.c_str());

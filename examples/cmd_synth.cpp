@@ -16,7 +16,8 @@ namespace {
 constexpr const char* kUsage =
     "usage: msgs synth --preset tiny|small|medium --out DIR [--seed S] [--force]\n"
     "       msgs synth --raw micasense|dji|p4m|sequoia --out DIR [--preset P] [--captures N] [--width W]\n"
-    "                  [--light-variation V] [--dls-bias B] [--panel-captures N] [--seed S] [--force]\n"
+    "                  [--light-variation V] [--dls-bias B] [--panel-captures N] [--panel-before]\n"
+    "                  [--light-drift D] [--seed S] [--force]\n"
     "\n"
     "Ray-trace a procedural outdoor scene (lawn, soil, trees, solar panels, pond, painted pad) seen\n"
     "by a 5-camera drone rig (RGB + G, R, RE, NIR) and write it in the public multi-spectral dataset\n"
@@ -46,7 +47,11 @@ constexpr const char* kUsage =
     "  --panel-captures N  N captures of a calibration panel after the flight's (default 0), for\n"
     "               `msgs import --radiometry panel`: MicaSense files are marked as the camera marks\n"
     "               them (CalibrationPicture, Albedo, ReflectArea); for DJI and Sequoia sets, which\n"
-    "               carry no such tags, DIR/panels.json lists them for `msgs import --panels`\n";
+    "               carry no such tags, DIR/panels.json lists them for `msgs import --panels`.\n"
+    "               The flight's captures are 2 s apart, the panel's a minute after the last\n"
+    "  --panel-before  one more capture of the panel, 5 minutes before the flight (numbered 0)\n"
+    "  --light-drift D  the sunlight grows linearly in time by D from the first capture to the last (-0.5 to\n"
+    "               1; default 0), as the sun climbs: panels before and after the flight follow it\n";
 
 int run_raw(const msgs::cli::Args& args) {
   msgs::synth::RawOptions opt;
@@ -61,6 +66,8 @@ int run_raw(const msgs::cli::Args& args) {
   opt.light_variation = args.number("light-variation", 0.0);
   opt.dls_bias = args.number("dls-bias", 0.0);
   opt.panel_captures = static_cast<int>(std::clamp(args.integer("panel-captures", 0), -1L, 1000000L));
+  opt.panel_before = args.flag("panel-before");
+  opt.light_drift = args.number("light-drift", 0.0);
   opt.overwrite = args.flag("force");
   const std::string out = args.require("out");
   msgs::synth::RawSummary s;
@@ -87,16 +94,18 @@ int run_raw(const msgs::cli::Args& args) {
 
 int run_synth(const std::vector<std::string>& argv) {
   const msgs::cli::Args args(
-      argv, {"preset", "out", "seed", "raw", "captures", "width", "light-variation", "dls-bias", "panel-captures"},
-      {"force", "help"});
+      argv,
+      {"preset", "out", "seed", "raw", "captures", "width", "light-variation", "dls-bias", "panel-captures", "light-drift"},
+      {"force", "help", "panel-before"});
   if (args.flag("help")) {
     std::fputs(kUsage, stdout);
     return 0;
   }
   if (!args.positional().empty()) throw msgs::cli::UsageError("unexpected argument '" + args.positional()[0] + "'");
   if (args.has("raw")) return run_raw(args);
-  for (const char* o : {"captures", "width", "light-variation", "dls-bias", "panel-captures"})
+  for (const char* o : {"captures", "width", "light-variation", "dls-bias", "panel-captures", "light-drift"})
     if (args.has(o)) throw msgs::cli::UsageError(std::string("--") + o + " needs --raw");
+  if (args.flag("panel-before")) throw msgs::cli::UsageError("--panel-before needs --raw");
   msgs::synth::SynthOptions opt;
   opt.preset = args.get("preset", "tiny");
   try {

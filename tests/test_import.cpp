@@ -635,6 +635,38 @@ TEST_CASE("msgs import --radiometry panel, panel+dls: the panel capture is set a
                 usage.second);
 }
 
+TEST_CASE("msgs import --radiometry panel: panels before and after the flight, interpolated in time") {
+  // The sun climbs: the light grows by 30% from the panel capture 5 minutes before take-off
+  // (IMG_0000) to the one a minute after landing (IMG_0006). A single panel's irradiance would be
+  // 4-25% off; the one interpolated to each capture's time is right.
+  msgs::synth::RawOptions opt = small_micasense_set();
+  opt.panel_captures = 1;
+  opt.panel_before = true;
+  opt.light_drift = 0.3;
+  const auto dir_or = colmap_case("panel_drift", "panel irradiance interpolated in time", opt);
+  if (!dir_or) return;
+  const fs::path& dir = *dir_or;
+  const auto ok = import_ok(dir, "ds", "--radiometry panel");
+  REQUIRE_MESSAGE(ok.first == 0, ok.second);
+  CHECK_MESSAGE(ok.second.find("2 captures of a calibration panel set aside (Xmp.Camera.CalibrationPicture): IMG_0000, "
+                               "IMG_0006") != std::string::npos,
+                ok.second);
+  CHECK_MESSAGE(ok.second.find("MS_NIR: the panel's irradiance interpolated in time between 2 sessions (") !=
+                    std::string::npos,
+                ok.second);
+  const Json tf = Json::parse(slurp(dir / "ds" / "transforms.json"));
+  REQUIRE(tf["frames"].size() == 20);
+  const auto& panels = tf["msgs_import"]["calibration_panels"];
+  REQUIRE(panels.size() == 8);
+  for (const auto& p : panels) CHECK(p.contains("time_s"));
+  const msgs::synth::SynthScene scene = msgs::synth::make_scene(raw_set_preset(opt), opt.seed);
+  for (const auto& f : tf["frames"]) {
+    CHECK(f["radiometry"]["metadata_keys"]["time"] == "Xmp.exif.DateTimeOriginal");
+    CHECK_MESSAGE(median_ratio_to_truth(dir, dir / "ds", f, scene, opt) == doctest::Approx(1.0).epsilon(0.01).scale(0),
+                  f["source"].get<std::string>());
+  }
+}
+
 TEST_CASE("msgs import: a DJI flight's sunlight sensor, with the panel pictures listed by hand or without") {
   // A Mavic 3M marks no panel pictures: the panel capture after the flight (0007) is listed with
   // its areas in panels.json. The light changes by up to 25% from capture to capture, and the

@@ -469,6 +469,53 @@ TEST_CASE("calibration panel: tags, the area's pixels, the band's irradiance, an
   CHECK(plan_band({m, no_black}, {"a.tif", "b.tif"}, Calibration::panel).missing.count("black level") == 1);
 }
 
+TEST_CASE("capture time and the panel's irradiance interpolated in time between sessions") {
+  // EXIF and XMP forms; sub-seconds are a decimal fraction; a time zone is ignored.
+  CHECK(*parse_date_time("1970:01:02 00:00:01") == 86401.0);
+  CHECK(*parse_date_time("2024:07:30 10:15:32") == doctest::Approx(1722334532.0));
+  CHECK(*parse_date_time("2024-07-30T10:15:32.25+02:00") == doctest::Approx(1722334532.25));
+  CHECK(*parse_date_time("2000-02-29T00:00:00Z") == 951782400.0);  // a leap day
+  for (const char* junk : {"", "2024:07:30", "2024:13:30 10:15:32", "2024-07-30 10:15:32", "2024:07:30T10:15:32",
+                           "abcd:07:30 10:15:32", "2024:07:30 25:15:32", "0000:00:00 00:00:00"})
+    CHECK_MESSAGE(!parse_date_time(junk), junk);
+  const CaptureMeta m = parse_capture_meta(
+      "Exif.Photo.DateTimeOriginal 2024:07:30 10:15:32\nExif.Photo.SubSecTimeOriginal 25\n"
+      "Xmp.exif.DateTimeOriginal 2024-07-30T11:00:00\n",
+      "a.tif");
+  CHECK(*m.time_s == doctest::Approx(1722334532.25));
+  CHECK(m.source.at("time") == "Exif.Photo.DateTimeOriginal");
+  CHECK(*parse_capture_meta("Xmp.exif.DateTimeOriginal 2024-07-30T10:15:33\n", "b.tif").time_s ==
+        doctest::Approx(1722334533.0));
+  // An unreadable time is no error (it only orders panel pictures), but says what was wrong.
+  const CaptureMeta bad = parse_capture_meta("Exif.Photo.DateTimeOriginal yesterday\n", "c.tif");
+  CHECK(!bad.time_s);
+  CHECK(bad.time_problem.find("'yesterday' is not a date and time") != std::string::npos);
+
+  // Three pictures before the flight within seconds, two after it: two sessions, their means.
+  const PanelSchedule s = panel_schedule({{2.0, 1000.0}, {2.2, 1004.0}, {1.8, 998.0}, {3.0, 1700.0}, {3.2, 1702.0}});
+  REQUIRE(s.timed());
+  REQUIRE(s.nodes.size() == 2);
+  CHECK(s.nodes[0][0] == doctest::Approx(1000.0 + 2.0 / 3.0));
+  CHECK(s.nodes[0][1] == doctest::Approx(2.0));
+  CHECK(s.nodes[1][1] == doctest::Approx(3.1));
+  CHECK(s.mean == doctest::Approx(2.44));
+  const double mid = 0.5 * (s.nodes[0][0] + s.nodes[1][0]);
+  CHECK(s.at(mid) == doctest::Approx(2.55));
+  CHECK(s.at(0.0) == doctest::Approx(2.0));     // before the first session: its irradiance
+  CHECK(s.at(5000.0) == doctest::Approx(3.1));  // after the last
+  CHECK(s.at(std::nullopt) == doctest::Approx(2.44));
+  // Pictures within kPanelSessionGap of each other, or one without a time: one irradiance.
+  CHECK(!panel_schedule({{2.0, 0.0}, {3.0, kPanelSessionGap}}).timed());
+  const PanelSchedule untimed = panel_schedule({{2.0, 0.0}, {3.0, std::nullopt}});
+  CHECK(!untimed.timed());
+  CHECK(untimed.at(5.0) == doctest::Approx(2.5));
+  // Three sessions: piecewise linear through them.
+  const PanelSchedule three = panel_schedule({{1.0, 0.0}, {2.0, 1000.0}, {1.0, 2000.0}});
+  CHECK(three.nodes.size() == 3);
+  CHECK(three.at(500.0) == doctest::Approx(1.5));
+  CHECK(three.at(1500.0) == doctest::Approx(1.5));
+}
+
 TEST_CASE("calibration panel: the tags of a real RedEdge-P panel capture, as exiv2 prints them") {
   // IMG_0001_1.tif (blue) of a RedEdge-P flight of 2024-07-30, read with exiv2 -q -P kv and the
   // keys of exiv2_metadata_keys(). Measured on its pixels with read_panel: 8470 pixels in the

@@ -11,6 +11,11 @@
 // reflectance = (DN - black_level) / (response x E): the band's scale is 1 / E. The area is the
 // quadrilateral the camera found (Xmp.Camera.ReflectArea, pixel coordinates of its corners);
 // pixels count when their integer coordinates lie inside or on it, as in MicaSense's library.
+//
+// Panel pictures taken before and after the flight give the sunlight at both ends of it: the
+// band's irradiance at an image's time is then interpolated linearly between the sessions of
+// panel pictures around it (PanelSchedule), which follows a sun climbing or sinking during the
+// flight; clouds passing in between need the light sensor (panel+dls).
 #pragma once
 
 #include <algorithm>
@@ -18,6 +23,8 @@
 #include <cmath>
 #include <cstddef>
 #include <filesystem>
+#include <optional>
+#include <vector>
 
 #include "msgs/image.hpp"
 #include "msgs/io/error.hpp"
@@ -124,6 +131,70 @@ inline PanelReading read_panel(const Image<float>& raw, const FrameRadiometry& r
     fail(file, cat("the panel area is no brighter than the black level (mean ", short_number(p.mean),
                    " above it): not a picture of the panel; leave it out of --images"));
   return p;
+}
+
+/// Panel pictures taken within this many seconds of the one before form one session (a panel is
+/// photographed a few times in a row); sessions are the nodes of a PanelSchedule.
+inline constexpr double kPanelSessionGap = 120.0;
+
+/// One panel picture's irradiance E and when it was taken.
+struct PanelIrradiance {
+  double e = 0.0;
+  std::optional<double> time_s;
+};
+
+/// A band's irradiance through the flight, from its panel pictures.
+struct PanelSchedule {
+  /// One node per session, (mean time, mean E), in time order; a single node when some picture
+  /// has no time or all of them make one session.
+  std::vector<std::array<double, 2>> nodes;
+  double mean = 0.0;  ///< E over all the pictures
+  /// Whether the irradiance follows time (two sessions or more).
+  bool timed() const { return nodes.size() > 1; }
+  /// E at time t: linear between the sessions around it, the nearest session's before the first
+  /// and after the last, the mean when t is unknown or the schedule is not timed.
+  double at(std::optional<double> t) const {
+    if (!timed() || !t) return mean;
+    if (*t <= nodes.front()[0]) return nodes.front()[1];
+    if (*t >= nodes.back()[0]) return nodes.back()[1];
+    std::size_t i = 1;
+    while (nodes[i][0] < *t) ++i;
+    const auto& a = nodes[i - 1];
+    const auto& b = nodes[i];
+    const double w = (*t - a[0]) / (b[0] - a[0]);
+    return a[1] + w * (b[1] - a[1]);
+  }
+};
+
+/// The schedule of a band's panel pictures (at least one, each E > 0).
+inline PanelSchedule panel_schedule(std::vector<PanelIrradiance> pictures) {
+  PanelSchedule s;
+  if (pictures.empty()) return s;
+  for (const PanelIrradiance& p : pictures) s.mean += p.e;
+  s.mean /= double(pictures.size());
+  const bool all_timed =
+      std::all_of(pictures.begin(), pictures.end(), [](const PanelIrradiance& p) { return p.time_s.has_value(); });
+  if (!all_timed) {
+    s.nodes.push_back({0.0, s.mean});
+    return s;
+  }
+  std::stable_sort(pictures.begin(), pictures.end(),
+                   [](const PanelIrradiance& a, const PanelIrradiance& b) { return *a.time_s < *b.time_s; });
+  double t_sum = 0.0, e_sum = 0.0, last = *pictures.front().time_s;
+  int n = 0;
+  for (const PanelIrradiance& p : pictures) {
+    if (n > 0 && *p.time_s - last > kPanelSessionGap) {
+      s.nodes.push_back({t_sum / n, e_sum / n});
+      t_sum = e_sum = 0.0;
+      n = 0;
+    }
+    t_sum += *p.time_s;
+    e_sum += p.e;
+    ++n;
+    last = *p.time_s;
+  }
+  s.nodes.push_back({t_sum / n, e_sum / n});
+  return s;
 }
 
 }  // namespace msgs::io

@@ -48,6 +48,9 @@
 //   focal plane   Exif.Photo.FocalPlaneXResolution / YResolution / ResolutionUnit and the same in
 //                 Xmp.exif (unit 2 inch, the EXIF default, 3 cm, 4 mm, 5 micrometre)
 //   bit depth     Exif.Image.BitsPerSample
+//   time          Exif.Photo.DateTimeOriginal ("2024:07:30 10:15:32") + Exif.Photo.SubSecTimeOriginal,
+//                 else Xmp.exif.DateTimeOriginal ("2024-07-30T10:15:32.25", a time zone ignored):
+//                 seconds since 1970-01-01 in the camera's clock, to order captures in time
 // Parsing never crashes on odd text: lines that are not "KEY VALUE" are ignored, and a recognised
 // key whose value is not what it should be is an IoError naming the file, the key and the value.
 #pragma once
@@ -118,6 +121,10 @@ struct CaptureMeta {
   /// unreadable one (`gps_problem` then says which key and value).
   std::optional<std::array<double, 3>> gps;
   std::string gps_problem;
+  /// When the image was taken: seconds since 1970-01-01 in the camera's clock (its time zone, if
+  /// any, ignored). Unset when the file gives none or an unreadable one (`time_problem` says which).
+  std::optional<double> time_s;
+  std::string time_problem;
   std::map<std::string, std::string> source;    ///< quantity -> exiv2 key it was read from
 
   /// Focal length in pixels (focal length x focal-plane resolution), when both are known.
@@ -148,7 +155,8 @@ inline const std::vector<std::string>& exiv2_metadata_keys() {
       "Xmp.MicaSense.RadiometricCalibration", "Xmp.Camera.HorizontalIrradiance", "Xmp.DLS.HorizontalIrradiance",
       "Xmp.Camera.IrradianceScaleToSIUnits", "Exif.Image.Model", "Exif.Image.Software", "Xmp.Camera.CalibrationPicture",
       "Xmp.Camera.Albedo", "Xmp.Camera.ReflectArea", "Xmp.MicaSense.PanelSerial", "Xmp.Camera.PanelSerial",
-      "Xmp.drone-dji.Irradiance", "Xmp.Camera.Irradiance", "Xmp.drone-dji.SensorGainAdjustment"};
+      "Xmp.drone-dji.Irradiance", "Xmp.Camera.Irradiance", "Xmp.drone-dji.SensorGainAdjustment",
+      "Exif.Photo.DateTimeOriginal", "Exif.Photo.SubSecTimeOriginal", "Xmp.exif.DateTimeOriginal"};
   return keys;
 }
 
@@ -316,6 +324,67 @@ inline std::vector<std::string> split_exiv2_output(std::string_view text, const 
 /// DJI's XMP (decimal degrees; some firmware spells GpsLongtitude), else XMP exif (DDD,MM.mmmK).
 /// A position is optional, so a malformed one is no error here: m.gps stays unset and
 /// m.gps_problem names the key and value (an import that needs positions reports it).
+/// Seconds since 1970-01-01 of a date and time "YYYY:MM:DD HH:MM:SS" (EXIF) or
+/// "YYYY-MM-DDTHH:MM:SS[.fff][zone]" (XMP; the zone is ignored); nullopt for anything else.
+inline std::optional<double> parse_date_time(std::string_view v) {
+  v = detail::trim(v);
+  if (v.size() < 19) return std::nullopt;
+  auto digits = [&](std::size_t at, std::size_t n) -> int {
+    int x = 0;
+    for (std::size_t i = at; i < at + n; ++i) {
+      if (v[i] < '0' || v[i] > '9') return -1;
+      x = 10 * x + (v[i] - '0');
+    }
+    return x;
+  };
+  const bool exif = v[4] == ':' && v[7] == ':' && v[10] == ' ';
+  const bool xmp = v[4] == '-' && v[7] == '-' && v[10] == 'T';
+  if ((!exif && !xmp) || v[13] != ':' || v[16] != ':') return std::nullopt;
+  const int y = digits(0, 4), mo = digits(5, 2), d = digits(8, 2), h = digits(11, 2), mi = digits(14, 2), s = digits(17, 2);
+  if (y < 1900 || mo < 1 || mo > 12 || d < 1 || d > 31 || h < 0 || h > 23 || mi < 0 || mi > 59 || s < 0 || s > 60)
+    return std::nullopt;
+  double frac = 0.0;
+  if (xmp && v.size() > 20 && v[19] == '.') {
+    double scale = 0.1;
+    for (std::size_t i = 20; i < v.size() && v[i] >= '0' && v[i] <= '9'; ++i, scale *= 0.1) frac += (v[i] - '0') * scale;
+  }
+  // Days from 1970-01-01 of the civil date (Howard Hinnant's days_from_civil).
+  const int yy = y - (mo <= 2 ? 1 : 0);
+  const int era = yy / 400, yoe = yy - era * 400;
+  const int doy = (153 * (mo + (mo > 2 ? -3 : 9)) + 2) / 5 + d - 1;
+  const long days = long(era) * 146097 + long(yoe) * 365 + yoe / 4 - yoe / 100 + doy - 719468;
+  return double(days) * 86400.0 + h * 3600.0 + mi * 60.0 + s + frac;
+}
+
+/// The capture time of `kv` into m.time_s (or the reason it is unreadable into m.time_problem).
+inline void read_time(const std::map<std::string, std::string>& kv, CaptureMeta& m) {
+  for (const char* key : {"Exif.Photo.DateTimeOriginal", "Xmp.exif.DateTimeOriginal"}) {
+    const auto it = kv.find(key);
+    if (it == kv.end()) continue;
+    const auto t = parse_date_time(it->second);
+    if (!t) {
+      m.time_problem = cat(key, " '", it->second.substr(0, 40), "' is not a date and time");
+      return;
+    }
+    m.time_s = *t;
+    m.source["time"] = key;
+    if (std::string_view(key) == "Exif.Photo.DateTimeOriginal")
+      if (const auto sub = kv.find("Exif.Photo.SubSecTimeOriginal"); sub != kv.end()) {
+        // "25" is a quarter second: the digits are a decimal fraction.
+        const std::string_view d = detail::trim(sub->second);
+        double frac = 0.0, scale = 0.1;
+        bool ok = !d.empty() && d.size() <= 9;
+        for (char c : d) {
+          if (c < '0' || c > '9') ok = false;
+          frac += (c - '0') * scale;
+          scale *= 0.1;
+        }
+        if (ok) *m.time_s += frac;
+      }
+    return;
+  }
+}
+
 inline void read_gps(const std::map<std::string, std::string>& kv, CaptureMeta& m) {
   const auto get = [&](const char* k) -> const std::string* {
     const auto it = kv.find(k);
@@ -579,6 +648,7 @@ inline CaptureMeta capture_meta_from_exiv2(const std::map<std::string, std::stri
     m.source["bits_per_sample"] = e->first;
   }
   read_gps(kv, m);
+  read_time(kv, m);
   return m;
 }
 

@@ -16,7 +16,7 @@
 //              scene's values), Camera:HorizontalIrradiance + Camera:IrradianceScaleToSIUnits (a
 //              DLS 2's reading of the capture's sunlight, see RawOptions::light_variation and
 //              dls_bias),
-//              exif:ExposureTime, exif:ISOSpeedRatings, exif:FocalLength,
+//              exif:ExposureTime, exif:ISOSpeedRatings, exif:FocalLength, exif:DateTimeOriginal,
 //              exif:FocalPlaneXResolution/YResolution/ResolutionUnit (4 = mm). Real MicaSense files
 //              keep exposure, ISO, focal length and black level in EXIF IFDs instead; the importer
 //              reads both places.
@@ -47,7 +47,8 @@
 // Exposure time and ISO vary per capture and band (an auto-exposing camera), seeded: the same
 // seed gives the same bytes.
 //
-// A set can end with captures of a calibration panel (RawOptions::panel_captures), as a camera
+// A set can end with captures of a calibration panel (RawOptions::panel_captures), and begin with
+// one (RawOptions::panel_before), as a camera
 // takes them on the ground: a grey panel of reflectance raw_panel_albedo() on a darker background,
 // seen a little off-centre and turned. MicaSense files mark them as the camera does
 // (Camera:CalibrationPicture 2, Camera:Albedo, Camera:ReflectArea: the corners of the panel's inner
@@ -97,6 +98,11 @@ struct RawOptions {
   double dls_bias = 0.0;
   /// Captures of a calibration panel after the flight's.
   int panel_captures = 0;
+  /// One more capture of the panel before the flight (numbered 0, 2 s before the first).
+  bool panel_before = false;
+  /// The sunlight grows linearly in time by this fraction from the first capture written to the
+  /// last (the sun climbing); -0.5 .. 1, 0 keeps it level.
+  double light_drift = 0.0;
   bool overwrite = false;
 };
 
@@ -154,11 +160,21 @@ inline std::vector<RawBand> raw_bands(std::string_view camera) {
   throw std::invalid_argument("unknown raw camera '" + std::string(camera) + "' (expected micasense, dji, p4m or sequoia)");
 }
 
-/// File name of band `b` of capture `capture` (0-based) as `camera` names it.
-inline std::string raw_file_name(std::string_view camera, const RawBand& b, int capture) {
+/// When capture `capture` (0-based; -1 the panel capture before the flight, `flight_captures` and
+/// later the panel captures after it) was taken, in seconds after midnight: the flight from
+/// 10:00:00, one capture every 2 s; the panel on the ground 5 minutes before take-off and a
+/// minute after landing.
+inline int raw_capture_seconds(int capture, int flight_captures) {
+  const int flight = 10 * 3600 + 2 * capture;
+  return capture < 0 ? flight - 300 : capture >= flight_captures ? flight + 60 : flight;
+}
+
+/// File name of band `b` of capture `capture` (0-based; -1 the panel capture before the flight,
+/// numbered 0) of a set of `flight_captures` flight captures, as `camera` names it.
+inline std::string raw_file_name(std::string_view camera, const RawBand& b, int capture, int flight_captures = 1 << 20) {
   char buf[96];
   const int n = capture + 1;
-  const int secs = 10 * 3600 + 2 * capture;  // 10:00:00, one capture every 2 s
+  const int secs = raw_capture_seconds(capture, flight_captures);
   const int hh = secs / 3600, mm = secs / 60 % 60, ss = secs % 60;
   if (camera == "micasense") std::snprintf(buf, sizeof buf, "IMG_%04d_%s.tif", n, b.name_part);
   else if (camera == "dji")
@@ -379,6 +395,7 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
     throw std::invalid_argument("the light variation must be 0 .. 0.9");
   if (!(opt.dls_bias >= -0.5 && opt.dls_bias <= 1.0)) throw std::invalid_argument("the light sensor's bias must be -0.5 .. 1");
   if (opt.panel_captures < 0 || opt.panel_captures > 100) throw std::invalid_argument("panel captures must be 0 .. 100");
+  if (!(opt.light_drift >= -0.5 && opt.light_drift <= 1.0)) throw std::invalid_argument("the light drift must be -0.5 .. 1");
   if (opt.captures > 0) preset.captures = opt.captures;
   if (opt.width > 0) {
     preset.ms_width = opt.width;
@@ -405,7 +422,7 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
   sum.rgb_height = preset.rgb_height;
   sum.min_exposure_s = 1e9;
   sum.min_iso = 1 << 30;
-  sum.panel_captures = opt.panel_captures;
+  sum.panel_captures = opt.panel_captures + (opt.panel_before ? 1 : 0);
   const bool black = opt.camera != "sequoia", sequoia = opt.camera == "sequoia", micasense = opt.camera == "micasense";
   // MicaSense's row gradient: a RedEdge's a2 and a3 (for its 960 rows), scaled to this height so
   // that the last row gains what the camera's does (6-26% at these exposures).
@@ -417,8 +434,9 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
   const bool dji = dji_camera(opt.camera);
   const double black_level = opt.camera == "dji" ? 3200.0 : opt.camera == "p4m" ? 4096.0 : 4800.0;
   nlohmann::ordered_json panel_list = nlohmann::ordered_json::array();  // panels.json's pictures
-  for (int ci = 0; ci < sum.captures + opt.panel_captures; ++ci) {
-    const bool panel = ci >= sum.captures;  // a calibration panel's capture, on the ground by the first
+  const int first = opt.panel_before ? -1 : 0, last = sum.captures + opt.panel_captures - 1;
+  for (int ci = first; ci <= last; ++ci) {
+    const bool panel = ci < 0 || ci >= sum.captures;  // a calibration panel's capture, on the ground by the first
     const Capture& cap = scene.captures[static_cast<std::size_t>(panel ? 0 : ci)];
     for (std::size_t bi = 0; bi < bands.size(); ++bi) {
       const RawBand& b = bands[bi];
@@ -435,13 +453,19 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
       RenderSettings rs;
       rs.aa = preset.aa;
       rs.jitter_seed = frame_jitter_seed(opt.seed, ci, b.mount) ^ (bi * 0x9E3779B97F4A7C15ULL);
-      const fs::path file = tmp / raw_file_name(opt.camera, b, ci);
+      const fs::path file = tmp / raw_file_name(opt.camera, b, ci, sum.captures);
       std::vector<std::pair<std::string, std::string>> attrs = {
           {"Camera:BandName", b.band_name},
           {"exif:FocalLength", detail::g10(focal_mm)},
           {"exif:FocalPlaneXResolution", detail::g10(px_per_mm)},
           {"exif:FocalPlaneYResolution", detail::g10(px_per_mm)},
           {"exif:FocalPlaneResolutionUnit", "4"}};
+      {
+        const int t = raw_capture_seconds(ci, sum.captures);
+        char when[32];
+        std::snprintf(when, sizeof when, "2024-06-01T%02d:%02d:%02d", t / 3600, t / 60 % 60, t % 60);
+        attrs.emplace_back("exif:DateTimeOriginal", when);
+      }
       detail::add_gps(opt.camera, cap.cameras[static_cast<std::size_t>(Band::D)].position(), attrs);
       std::vector<std::pair<std::string, std::string>> elems;
       if (b.rgb) {
@@ -455,7 +479,11 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
         e.exposure_s = 1.0 / std::round(4.0 / e.exposure_s);
         e.iso = 100;
       }
-      const double light = raw_light(opt.seed, ci, opt.light_variation);
+      const double t_first = raw_capture_seconds(first, sum.captures), t_last = raw_capture_seconds(last, sum.captures);
+      const double light =
+          raw_light(opt.seed, ci, opt.light_variation) *
+          (1.0 + opt.light_drift *
+                     (t_last > t_first ? (raw_capture_seconds(ci, sum.captures) - t_first) / (t_last - t_first) : 0.0));
       sum.min_exposure_s = std::min(sum.min_exposure_s, e.exposure_s);
       sum.max_exposure_s = std::max(sum.max_exposure_s, e.exposure_s);
       sum.min_iso = std::min(sum.min_iso, e.iso);
@@ -472,7 +500,7 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
       const double pdx = 0.03 * (double(bi) - 2.0), pdy = 0.02 * (double(bi % 2) - 0.5);
       if (panel && !micasense) {  // listed for --panels, as a user would from the pictures
         nlohmann::ordered_json pic;
-        pic["file"] = raw_file_name(opt.camera, b, ci);
+        pic["file"] = raw_file_name(opt.camera, b, ci, sum.captures);
         pic["area"] = detail::panel_area(cam.width, cam.height, pdx, pdy);
         pic["albedo"] = raw_panel_albedo(b.wavelength_nm);
         panel_list.push_back(pic);
