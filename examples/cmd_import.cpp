@@ -55,7 +55,8 @@ constexpr const char* kUsage =
     "                   [--panels FILE]\n"
     "                   [--matching exhaustive|window|gps]\n"
     "                   [--window N] [--neighbours K] [--sift-threshold T] [--ba-tolerance X]\n"
-    "                   [--merge-models on|off] [--rig on|off] [--allow-partial] [--force]\n"
+    "                   [--merge-models on|off] [--rig on|off] [--allow-partial] [--downscales N]\n"
+    "                   [--force]\n"
     "                   [--colmap BIN] [--exiv2 BIN] [--keep-work]\n"
     "\n"
     "Turn a folder of raw multi-band captures into the multi-spectral dataset layout (transforms.json,\n"
@@ -159,6 +160,8 @@ constexpr const char* kUsage =
     "  --rig R             on (default: place images COLMAP did not register by the rig, step 5)\n"
     "                      or off (only COLMAP's poses)\n"
     "  --allow-partial     drop images that have no pose (with a warning) instead of failing\n"
+    "  --downscales N      also write copies downscaled by 2, 4, .. 2^N (box filter) into images_2/,\n"
+    "                      images_4/, .. (0 to 4; default 0), for `msgs train --images images_4`\n"
     "  --force             replace an existing --out once the new dataset is complete\n"
     "  --colmap BIN        COLMAP executable (default: colmap on PATH)\n"
     "  --exiv2 BIN         exiv2 executable (default: exiv2 on PATH)\n"
@@ -430,6 +433,24 @@ msgs::io::PanelSchedule calibrate_with_panels(std::vector<Item>& panels, const s
                 schedule.nodes.size(), nodes.c_str());
   }
   return schedule;
+}
+
+/// Copies of `img` (images/`name` of the layout) downscaled by 2, 4, .. 2^`levels` into images_2/,
+/// images_4/, ..: 16-bit PNG for a band's normalised values (`sixteen_bit`), else by the name's
+/// extension (a JPEG for the RGB camera's JPEG, an 8-bit PNG otherwise). load_frame_image reads them.
+void write_downscaled(const fs::path& layout, const std::string& name, const msgs::Image<float>& img, long levels,
+                      bool sixteen_bit) {
+  const std::string ext = msgs::io::detail::lower_extension(name);
+  for (long k = 1; k <= levels; ++k) {
+    const int f = 1 << k;
+    const fs::path p = layout / cat("images_", f) / name;
+    std::error_code ec;
+    fs::create_directories(p.parent_path(), ec);
+    const msgs::Image<float> small = msgs::io::downscale(img, f);
+    if (sixteen_bit) msgs::io::write_png16(p, small);
+    else if (ext == ".jpg" || ext == ".jpeg") msgs::io::write_jpeg(p, small, 95);
+    else msgs::io::write_png8(p, small);
+  }
 }
 
 /// A colmap stage with progress, timing, log and the log's tail on failure.
@@ -806,7 +827,8 @@ MergeResult merge_rest_models(const std::vector<Item>& items, std::size_t captur
 int run_import(const std::vector<std::string>& argv) {
   const msgs::cli::Args args(argv,
                              {"images", "out", "camera", "bands", "eval-every", "camera-model", "radiometry", "panel-albedo", "panels", "matching",
-                              "window", "neighbours", "sift-threshold", "ba-tolerance", "merge-models", "rig", "colmap", "exiv2"},
+                              "window", "neighbours", "sift-threshold", "ba-tolerance", "merge-models", "rig", "colmap", "exiv2",
+                              "downscales"},
                              {"force", "allow-partial", "keep-work", "help"});
   if (args.flag("help")) {
     std::fputs(kUsage, stdout);
@@ -853,6 +875,8 @@ int run_import(const std::vector<std::string>& argv) {
   const std::map<std::string, double> panel_albedo = parse_panel_albedo(args.get("panel-albedo", ""));
   if (!panel_albedo.empty() && !by_panel)
     throw msgs::cli::UsageError("--panel-albedo goes with --radiometry panel or panel+dls");
+  const long downscales = args.integer("downscales", 0);
+  if (downscales < 0 || downscales > 4) throw msgs::cli::UsageError("--downscales expects 0 to 4");
   const std::string matching = args.get("matching", "exhaustive");
   if (matching != "exhaustive" && matching != "window" && matching != "gps")
     throw msgs::cli::UsageError("--matching expects exhaustive, window or gps, got '" + matching + "'");
@@ -1165,6 +1189,7 @@ int run_import(const std::vector<std::string>& argv) {
       fs::copy_file(src, layout / "images" / it.out_name, ec);
       if (ec) fail(layout / "images" / it.out_name, cat("cannot copy ", src.string(), ": ", ec.message()));
       msgs::io::write_png8(work / "images" / it.colmap_name, raw);
+      write_downscaled(layout, it.out_name, raw, downscales, false);
       continue;
     }
     msgs::Image<float> norm = msgs::io::normalise_image(raw, it.rad, src);
@@ -1175,6 +1200,7 @@ int run_import(const std::vector<std::string>& argv) {
     }
     msgs::io::write_png16(layout / "images" / it.out_name, norm);
     msgs::io::write_png8(work / "images" / it.colmap_name, sift_copy(norm));
+    write_downscaled(layout, it.out_name, norm, downscales, true);
   }
   if (reflectance) {
     // The sunlight each band's reflectance was computed under (from MicaSense's a1): how much
@@ -1398,6 +1424,7 @@ int run_import(const std::vector<std::string>& argv) {
     const auto reg = registered.find(it.colmap_name);
     if (reg == registered.end()) {
       fs::remove(layout / "images" / it.out_name, ec);
+      for (long k = 1; k <= downscales; ++k) fs::remove(layout / cat("images_", 1 << k) / it.out_name, ec);
       continue;
     }
     const msgs::io::ColmapImage& im = *reg->second;

@@ -10,6 +10,7 @@
 #include <msgs/io/capture_names.hpp>
 #include <msgs/io/dataset.hpp>
 #include <msgs/io/image_io.hpp>
+#include <msgs/io/load_scene.hpp>
 #include <msgs/io/match_pairs.hpp>
 #include <msgs/synth.hpp>
 #include <msgs/synth/pose_error.hpp>
@@ -715,7 +716,7 @@ TEST_CASE("msgs import: a DJI flight's sunlight sensor, with the panel pictures 
   // x SensorGainAdjustment / Irradiance = kDjiReflectanceFactor x reflectance / 1.1 in the
   // synthetic set (the sensor reads 10% high), and msgs' one scale maps the brightest value to 1:
   // every frame's ratio to the truth is that x the scale, whatever the light and the band.
-  const auto sun = import_ok(dir, "sun", "--radiometry sun-sensor" + list);
+  const auto sun = import_ok(dir, "sun", "--radiometry sun-sensor --downscales 1" + list);
   REQUIRE_MESSAGE(sun.first == 0, sun.second);
   CHECK_MESSAGE(sun.second.find("MS_NIR: relative reflectance ") != std::string::npos, sun.second);
   const Json ts = Json::parse(slurp(dir / "sun" / "transforms.json"));
@@ -735,6 +736,27 @@ TEST_CASE("msgs import: a DJI flight's sunlight sensor, with the panel pictures 
                   src);
   }
   CHECK(checked == 24);
+  // --downscales 1: images_2/ holds every frame at half size, the band values in 16 bits, the RGB
+  // camera's as a JPEG; training with --images images_2 reads them.
+  for (const auto& f : ts["frames"]) {
+    const std::string path = f["file_path"];
+    REQUIRE(path.rfind("images/", 0) == 0);
+    const fs::path half = dir / "sun" / "images_2" / path.substr(7);
+    REQUIRE_MESSAGE(fs::exists(half), half);
+    const auto full = msgs::io::read_image(dir / "sun" / path);
+    const auto small = msgs::io::read_image(half);
+    const auto expected = msgs::io::downscale(full, 2);
+    REQUIRE(small.width == expected.width);
+    REQUIRE(small.height == expected.height);
+    double err = 0;
+    for (std::size_t i = 0; i < small.data.size(); ++i) err = std::max(err, double(std::abs(small.data[i] - expected.data[i])));
+    CHECK_MESSAGE(err < (f["mm_channel"] == "D" ? 0.25 : 1.0 / 65535), path << ": " << err);
+  }
+  msgs::io::LoadOptions lo;
+  const msgs::io::Dataset half_ds = msgs::io::load_scene(dir / "sun", lo, "images_2");
+  CHECK(half_ds.downscale == 2);
+  REQUIRE(!half_ds.frames.empty());
+  CHECK(msgs::io::load_frame_image(half_ds, half_ds.frames[0]).width == (half_ds.frames[0].raw_camera.width + 1) / 2);
 
   // A list naming a file that is not there, and one whose area is no area: refused before COLMAP.
   const auto refused = [&](const std::string& json, const std::string& out) {

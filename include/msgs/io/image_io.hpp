@@ -5,6 +5,7 @@
 
 #include <png.h>
 #include <stb/stb_image.h>
+#include <stb/stb_image_write.h>
 #include <tiffio.h>
 
 #include <algorithm>
@@ -511,6 +512,31 @@ inline Image<float> read_npy(const std::filesystem::path& p) {
     std::memcpy(&img.data[i], &u, 4);
   }
   return img;
+}
+
+namespace detail {
+inline void append_jpeg_bytes(void* ctx, void* data, int size) {
+  auto* out = static_cast<std::vector<unsigned char>*>(ctx);
+  out->insert(out->end(), static_cast<unsigned char*>(data), static_cast<unsigned char*>(data) + size);
+}
+}  // namespace detail
+
+/// Write an 8-bit JPEG of a grey or RGB image at `quality` (1..100): values clamped to [0, 1].
+/// Atomic; NaN pixels are an error.
+inline void write_jpeg(const std::filesystem::path& p, const Image<float>& img, int quality = 95) {
+  detail::check_writable_image(p, img);
+  if (img.channels != 1 && img.channels != 3) fail(p, cat("a JPEG holds 1 or 3 channels, not ", img.channels));
+  std::vector<unsigned char> px(img.data.size());
+  for (std::size_t i = 0; i < px.size(); ++i) {
+    if (std::isnan(img.data[i])) fail(p, cat("pixel value ", i, " is NaN"));
+    px[i] = static_cast<unsigned char>(std::lround(std::clamp(img.data[i], 0.0f, 1.0f) * 255.0f));
+  }
+  std::vector<unsigned char> jpg;
+  if (!stbi_write_jpg_to_func(detail::append_jpeg_bytes, &jpg, img.width, img.height, img.channels, px.data(),
+                              std::clamp(quality, 1, 100)) ||
+      jpg.empty())
+    fail(p, "JPEG encoding failed");
+  write_bytes_atomic(p, jpg.data(), jpg.size());
 }
 
 /// Write by extension: .png -> 8-bit PNG, .tif/.tiff -> 16-bit TIFF, .npy -> float32.

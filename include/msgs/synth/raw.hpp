@@ -354,19 +354,13 @@ inline void write_raw_tiff(const std::filesystem::path& p, int w, int h, const s
   out.commit();
 }
 
-inline void append_bytes(void* ctx, void* data, int size) {
-  auto* v = static_cast<std::vector<unsigned char>*>(ctx);
-  const auto* b = static_cast<const unsigned char*>(data);
-  v->insert(v->end(), b, b + size);
-}
-
 /// 8-bit sRGB JPEG (quality 95) with the XMP packet in an APP1 segment right after SOI. Atomic.
 inline void write_rgb_jpeg(const std::filesystem::path& p, const Image<float>& srgb, const std::string& xmp) {
   std::vector<unsigned char> px(srgb.data.size());
   for (std::size_t i = 0; i < px.size(); ++i)
     px[i] = static_cast<unsigned char>(std::lround(std::clamp(srgb.data[i], 0.f, 1.f) * 255.f));
   std::vector<unsigned char> jpg;
-  if (!stbi_write_jpg_to_func(append_bytes, &jpg, srgb.width, srgb.height, 3, px.data(), 95) || jpg.size() < 4)
+  if (!stbi_write_jpg_to_func(io::detail::append_jpeg_bytes, &jpg, srgb.width, srgb.height, 3, px.data(), 95) || jpg.size() < 4)
     io::fail(p, "JPEG encoding failed");
   static constexpr char ns[] = "http://ns.adobe.com/xap/1.0/";  // with its terminating NUL
   const std::size_t len = 2 + sizeof ns + xmp.size();
