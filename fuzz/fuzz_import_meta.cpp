@@ -49,19 +49,13 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     io::FrameRadiometry r = io::frame_radiometry(m, plan.steps, 65535.0, 8, 6);
     io::check_radiometry(r, 8, 6, "fuzz.tif");
     (void)io::relative_radiance(1000.0, 3.0, 2.0, r);
-    // And the plan for reflectance, where nothing is missing.
-    const io::BandPlan refl = io::plan_band({m, m}, {"a.tif", "b.tif"}, io::Calibration::sun_sensor);
-    if (refl.missing.empty()) {
-      io::FrameRadiometry q = io::frame_radiometry(m, refl.steps, 65535.0, 8, 6);
-      q.scale = io::reflectance_scale(q);
-      io::check_radiometry(q, 8, 6, "fuzz.tif");
-      (void)io::relative_radiance(1000.0, 3.0, 2.0, q);
-    }
-    // And the light sensor's band ratios (DJI's sunlight sensor, MicaSense's DLS 2).
-    const io::BandPlan sun = io::plan_band({m, m}, {"a.tif", "b.tif"}, io::Calibration::sun_sensor_relative);
-    if (sun.missing.empty()) {
-      io::FrameRadiometry q = io::frame_radiometry(m, sun.steps, 65535.0, 8, 6);
-      q.scale = io::light_sensor_scale(q);
+    // And the plans for reflectance and for the light sensor's band ratios (DJI's sunlight sensor,
+    // MicaSense's DLS 2), where nothing is missing.
+    for (const io::Calibration c : {io::Calibration::sun_sensor, io::Calibration::sun_sensor_relative}) {
+      const io::BandPlan p = io::plan_band({m, m}, {"a.tif", "b.tif"}, c);
+      if (!p.missing.empty()) continue;
+      io::FrameRadiometry q = io::frame_radiometry(m, p.steps, 65535.0, 8, 6);
+      q.scale = c == io::Calibration::sun_sensor ? io::reflectance_scale(q) : io::light_sensor_scale(q);
       io::check_radiometry(q, 8, 6, "fuzz.tif");
       (void)io::relative_radiance(1000.0, 3.0, 2.0, q);
     }
