@@ -417,8 +417,10 @@ msgs::io::PanelSchedule calibrate_with_panels(std::vector<Item>& panels, const s
                         " apart, with capture times) are interpolated in time; --radiometry panel+dls follows the"
                         " light with the light sensor");
   if (schedule.timed()) {
-    // In W/m^2/nm where MicaSense's a1 gives them, as the pictures above.
-    const double watts_per_unit = msgs::io::reflectance_irradiance(panels[use[0]].rad) * panels[use[0]].rad.scale;
+    // In W/m^2/nm where MicaSense's a1 gives them, as the pictures above (with the light sensor,
+    // the nodes are the panel's irradiance per unit of its reading: no unit).
+    const double watts_per_unit =
+        steps.irradiance ? 0.0 : msgs::io::reflectance_irradiance(panels[use[0]].rad) * panels[use[0]].rad.scale;
     std::string nodes;
     for (const auto& n : schedule.nodes) {
       const long t = std::lround(n[0]) % 86400;
