@@ -78,7 +78,8 @@ constexpr const char* kUsage =
     "     msgs/io/capture_meta.hpp). These values are relative radiance, not reflectance: indices\n"
     "     such as NDVI computed from them are shifted from reflectance-based ones. With\n"
     "     --radiometry reflectance, MicaSense files give reflectance instead: pi x radiance (a1\n"
-    "     of RadiometricCalibration) / the horizontal irradiance of the DLS 2 light sensor; with\n"
+    "     of RadiometricCalibration) / the horizontal irradiance of the DLS 2 light sensor (a\n"
+    "     DLS 1's tilted reading levelled for the sun's place, as MicaSense's library does); with\n"
     "     panel or panel+dls, reflectance from the calibration-panel captures the camera marked;\n"
     "     with sun-sensor, reflectance up to one factor common to all bands from DJI's sunlight\n"
     "     sensor (or MicaSense's DLS 2), so that indices such as NDVI are those of reflectance.\n"
@@ -112,7 +113,7 @@ constexpr const char* kUsage =
     "  --camera-model M    COLMAP camera model: OPENCV (default), PINHOLE, SIMPLE_RADIAL, RADIAL\n"
     "  --radiometry R      auto (default: use the metadata), none (keep the stored values; the\n"
     "                      focal lengths in the metadata are still COLMAP's priors) or reflectance\n"
-    "                      (pi x radiance / irradiance from MicaSense's a1 and its DLS 2 light\n"
+    "                      (pi x radiance / irradiance from MicaSense's a1 and its DLS light\n"
     "                      sensor, no band scale: every band image must carry them, else an error;\n"
     "                      values above 1 are clipped, with a warning), panel (reflectance from\n"
     "                      the captures of a calibration panel the camera marked and read:\n"
@@ -1238,6 +1239,32 @@ int run_import(const std::vector<std::string>& argv) {
         std::printf("  warning: %s: the light sensor's readings change by %.3g%% over the flight, which one panel"
                     " irradiance does not follow; --radiometry panel+dls does\n",
                     band.c_str(), 100.0 * (dls_hi / dls_lo - 1.0));
+      // Readings msgs levelled for the sun's place (a DLS 1, or a DLS 2's faulty firmware).
+      std::size_t levelled = 0;
+      double el_lo = 90, el_hi = -90, th_lo = 180, th_hi = 0;
+      for (std::size_t i : idx)
+        if (const auto& m = items[i].meta; m.sun_elevation_deg && items[i].rad.steps.irradiance) {
+          ++levelled;
+          el_lo = std::min(el_lo, *m.sun_elevation_deg);
+          el_hi = std::max(el_hi, *m.sun_elevation_deg);
+          if (m.sun_sensor_angle_deg) {
+            th_lo = std::min(th_lo, *m.sun_sensor_angle_deg);
+            th_hi = std::max(th_hi, *m.sun_sensor_angle_deg);
+          }
+        }
+      const auto one_decimal = [](double v) {
+        char buf[32];
+        std::snprintf(buf, sizeof buf, "%.1f", v);
+        return std::string(buf);
+      };
+      if (levelled > 0)
+        std::printf("  %s: %zu of %zu light-sensor readings levelled for the sun, %s degrees high%s\n", band.c_str(),
+                    levelled, idx.size(),
+                    (el_hi - el_lo < 0.05 ? one_decimal(el_lo) : cat(one_decimal(el_lo), " to ", one_decimal(el_hi))).c_str(),
+                    th_hi >= th_lo ? cat(", ", msgs::io::short_number(th_lo, 3), " to ", msgs::io::short_number(th_hi, 3),
+                                         " degrees from the tilted sensor's normal")
+                                         .c_str()
+                                   : "");
     }
     // What the bands hold, to hold against what the surfaces should reflect (vegetation: a few
     // percent in red, 30-50% in the near infra-red).
@@ -1485,6 +1512,8 @@ int run_import(const std::vector<std::string>& argv) {
         rad["irradiance_w_m2_nm"] = msgs::io::reflectance_irradiance(it.rad);
       }
       if (s.irradiance) rad[it.meta.irradiance_si ? "light_sensor_w_m2_nm" : "light_sensor"] = it.rad.irradiance;
+      if (s.irradiance && it.meta.sun_elevation_deg) rad["sun_elevation_deg"] = *it.meta.sun_elevation_deg;
+      if (s.irradiance && it.meta.sun_sensor_angle_deg) rad["sun_sensor_angle_deg"] = *it.meta.sun_sensor_angle_deg;
       if (band_ratios) rad[it.rad.radiance_a1 > 0 ? "radiance_a1" : "gain_adjustment"] =
           it.rad.radiance_a1 > 0 ? it.rad.radiance_a1 : it.rad.gain_adjustment;
       rad["scale"] = it.rad.scale;

@@ -17,7 +17,7 @@ constexpr const char* kUsage =
     "usage: msgs synth --preset tiny|small|medium --out DIR [--seed S] [--force]\n"
     "       msgs synth --raw micasense|dji|p4m|sequoia --out DIR [--preset P] [--captures N] [--width W]\n"
     "                  [--light-variation V] [--dls-bias B] [--panel-captures N] [--panel-before]\n"
-    "                  [--light-drift D] [--seed S] [--force]\n"
+    "                  [--light-drift D] [--dls1] [--seed S] [--force]\n"
     "\n"
     "Ray-trace a procedural outdoor scene (lawn, soil, trees, solar panels, pond, painted pad) seen\n"
     "by a 5-camera drone rig (RGB + G, R, RE, NIR) and write it in the public multi-spectral dataset\n"
@@ -51,7 +51,11 @@ constexpr const char* kUsage =
     "               The flight's captures are 2 s apart, the panel's a minute after the last\n"
     "  --panel-before  one more capture of the panel, 5 minutes before the flight (numbered 0)\n"
     "  --light-drift D  the sunlight grows linearly in time by D from the first capture to the last (-0.5 to\n"
-    "               1; default 0), as the sun climbs: panels before and after the flight follow it\n";
+    "               1; default 0), as the sun climbs: panels before and after the flight follow it\n"
+    "  --dls1       MicaSense files as a RedEdge-M with the first light sensor writes them: its\n"
+    "               tilted reading (DLS:SpectralIrradiance) and attitude (DLS:Yaw/Pitch/Roll) under a\n"
+    "               clear sky, the drone pitched 8 degrees forward on flight lines that turn back\n"
+    "               at every capture, and no HorizontalIrradiance (`msgs import` levels the reading)\n";
 
 int run_raw(const msgs::cli::Args& args) {
   msgs::synth::RawOptions opt;
@@ -68,6 +72,7 @@ int run_raw(const msgs::cli::Args& args) {
   opt.panel_captures = static_cast<int>(std::clamp(args.integer("panel-captures", 0), -1L, 1000000L));
   opt.panel_before = args.flag("panel-before");
   opt.light_drift = args.number("light-drift", 0.0);
+  opt.dls1 = args.flag("dls1");
   opt.overwrite = args.flag("force");
   const std::string out = args.require("out");
   msgs::synth::RawSummary s;
@@ -96,7 +101,7 @@ int run_synth(const std::vector<std::string>& argv) {
   const msgs::cli::Args args(
       argv,
       {"preset", "out", "seed", "raw", "captures", "width", "light-variation", "dls-bias", "panel-captures", "light-drift"},
-      {"force", "help", "panel-before"});
+      {"force", "help", "panel-before", "dls1"});
   if (args.flag("help")) {
     std::fputs(kUsage, stdout);
     return 0;
@@ -105,7 +110,8 @@ int run_synth(const std::vector<std::string>& argv) {
   if (args.has("raw")) return run_raw(args);
   for (const char* o : {"captures", "width", "light-variation", "dls-bias", "panel-captures", "light-drift"})
     if (args.has(o)) throw msgs::cli::UsageError(std::string("--") + o + " needs --raw");
-  if (args.flag("panel-before")) throw msgs::cli::UsageError("--panel-before needs --raw");
+  for (const char* f : {"panel-before", "dls1"})
+    if (args.flag(f)) throw msgs::cli::UsageError(std::string("--") + f + " needs --raw");
   msgs::synth::SynthOptions opt;
   opt.preset = args.get("preset", "tiny");
   try {

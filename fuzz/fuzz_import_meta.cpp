@@ -44,6 +44,11 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
 
   fuzz::expect_io_error_only("parse_capture_meta", [&] {
     const io::CaptureMeta m = io::parse_capture_meta(text, "fuzz.tif");
+    // A light sensor's reading, levelled for the sun or not, is a positive finite irradiance.
+    if (m.irradiance && !(std::isfinite(*m.irradiance) && *m.irradiance > 0)) {
+      std::fprintf(stderr, "parse_capture_meta: a light-sensor irradiance that is not positive and finite\n");
+      std::abort();
+    }
     // The plan and the per-frame parameters must also be safe to form (and to check).
     const io::BandPlan plan = io::plan_band({m, m}, {"a.tif", "b.tif"});
     io::FrameRadiometry r = io::frame_radiometry(m, plan.steps, 65535.0, 8, 6);

@@ -543,6 +543,40 @@ TEST_CASE("msgs import --radiometry reflectance: the DLS 2 takes out changing su
   CHECK(!leftovers(dir, "dji"));
 }
 
+TEST_CASE("msgs import --radiometry reflectance: a DLS 1's tilted readings are levelled for the sun") {
+  // A RedEdge-M with the first light sensor: the drone pitched 8 degrees forward on lines that
+  // turn back at every capture, so the sensor faces the sun more on one heading than on the other.
+  msgs::synth::RawOptions opt = small_micasense_set();
+  opt.light_variation = 0.25;
+  opt.dls1 = true;
+  const auto dir_or = colmap_case("reflectance_dls1", "levelling a DLS 1's readings", opt);
+  if (!dir_or) return;
+  const fs::path& dir = *dir_or;
+  const auto log_run = import_ok(dir, "ds", "--radiometry reflectance");
+  const int rc = log_run.first;
+  const std::string& log = log_run.second;
+  REQUIRE_MESSAGE(rc == 0, log);
+  CHECK_MESSAGE(log.find("MS_NIR: 5 of 5 light-sensor readings levelled for the sun, 55.0 degrees high") != std::string::npos,
+                log);
+  const Json tf = Json::parse(slurp(dir / "ds" / "transforms.json"));
+  const msgs::synth::SynthScene scene = msgs::synth::make_scene(raw_set_preset(opt), opt.seed);
+  REQUIRE(tf["frames"].size() == 20);
+  double angle_lo = 180, angle_hi = 0;
+  for (const auto& f : tf["frames"]) {
+    const auto& rad = f["radiometry"];
+    REQUIRE(rad["applied"] == true);
+    CHECK(rad["metadata_keys"]["irradiance"] == "Xmp.DLS.SpectralIrradiance levelled with Xmp.DLS.Yaw/Pitch/Roll");
+    angle_lo = std::min(angle_lo, rad["sun_sensor_angle_deg"].get<double>());
+    angle_hi = std::max(angle_hi, rad["sun_sensor_angle_deg"].get<double>());
+    // Levelled, every image gives the scene's reflectances back, whichever way the drone flew.
+    CHECK_MESSAGE(median_ratio_to_truth(dir, dir / "ds", f, scene, opt) == doctest::Approx(1.0).epsilon(0.01).scale(0),
+                  f["source"].get<std::string>());
+  }
+  // The headings put the sun 30 and 41 degrees from the sensor: taken as it was, the reading of
+  // one heading would be (cos 30 + 1/6) / (cos 41 + 1/6) = 1.13 times the other's.
+  CHECK(angle_hi - angle_lo > 10.0);
+}
+
 TEST_CASE("msgs import --radiometry panel, panel+dls: the panel capture is set aside and sets the reflectance's level") {
   // Sunlight that changes by up to 25%, a light sensor that reads 10% high, and one capture of a
   // calibration panel after the flight (IMG_0006).

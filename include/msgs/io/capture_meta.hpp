@@ -35,6 +35,14 @@
 //                 wrote it wrongly; in DJI files (Mavic 3M, P4 Multispectral) the sunlight sensor's
 //                 reading of this band, in its own units: Xmp.drone-dji.Irradiance, else
 //                 Xmp.Camera.Irradiance (DJI's guides: "solar irradiance value after compensation")
+//   levelled      where a MicaSense file has no HorizontalIrradiance, or one its firmware wrote
+//                 wrongly, the level-ground irradiance is computed as MicaSense's library does
+//                 (msgs/io/light_sensor_tilt.hpp), with the sun's place from the position and the
+//                 capture time (UTC, as MicaSense cameras write it): a DLS 2's
+//                 Xmp.DLS.DirectIrradiance x sin(sun elevation) + Xmp.DLS.ScatteredIrradiance, else
+//                 a DLS 1's tilted Xmp.DLS.SpectralIrradiance levelled with its attitude
+//                 Xmp.DLS.Yaw/Pitch/Roll (radians); x IrradianceScaleToSIUnits, else 0.01 where
+//                 the file has HorizontalIrradiance (DLS 2) and 1 where it has not (DLS 1)
 //   band factor   Xmp.drone-dji.SensorGainAdjustment (DJI: the band camera's sensitivity relative
 //                 to DJI's reference module, which the image is multiplied by before it is divided
 //                 by the sunlight sensor's reading)
@@ -48,7 +56,8 @@
 //   focal plane   Exif.Photo.FocalPlaneXResolution / YResolution / ResolutionUnit and the same in
 //                 Xmp.exif (unit 2 inch, the EXIF default, 3 cm, 4 mm, 5 micrometre)
 //   bit depth     Exif.Image.BitsPerSample
-//   time          Exif.Photo.DateTimeOriginal ("2024:07:30 10:15:32") + Exif.Photo.SubSecTimeOriginal,
+//   time          Exif.Photo.DateTimeOriginal ("2024:07:30 10:15:32") + Exif.Photo.SubSecTimeOriginal
+//                 or Exif.Photo.SubSecTime (MicaSense's, which may be negative: "-279654"),
 //                 else Xmp.exif.DateTimeOriginal ("2024-07-30T10:15:32.25", a time zone ignored):
 //                 seconds since 1970-01-01 in the camera's clock, to order captures in time
 // Parsing never crashes on odd text: lines that are not "KEY VALUE" are ignored, and a recognised
@@ -62,12 +71,15 @@
 #include <cstdlib>
 #include <filesystem>
 #include <map>
+#include <numbers>
 #include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
 
 #include "msgs/io/error.hpp"
+#include "msgs/io/light_sensor_tilt.hpp"
+#include "msgs/io/sun_position.hpp"
 
 namespace msgs::io {
 
@@ -104,8 +116,13 @@ struct CaptureMeta {
   /// DJI's SensorGainAdjustment: (DN - black) / 2^bits / (exposure x gain) x this / the sunlight
   /// sensor's reading is reflectance up to one factor common to every band (DJI's guides).
   std::optional<double> gain_adjustment;
-  /// Why an irradiance the file holds was not taken (a firmware known to write it wrongly).
+  /// Why an irradiance the file holds was not taken (a firmware known to write it wrongly, a
+  /// reading that could not be levelled).
   std::string irradiance_problem;
+  /// Where `irradiance` was levelled for the sun's place (a DLS 1's tilted reading, a DLS 2 whose
+  /// firmware wrote HorizontalIrradiance wrongly): the sun's elevation, and for a DLS 1 its angle
+  /// from the sensor's normal, in degrees.
+  std::optional<double> sun_elevation_deg, sun_sensor_angle_deg;
   /// Xmp.Camera.CalibrationPicture: 0 a flight image, 1 a panel picture the camera could not
   /// read, 2 one it read (a Sequoia writes 1 or 2 for either).
   int calibration_picture = 0;
@@ -156,7 +173,9 @@ inline const std::vector<std::string>& exiv2_metadata_keys() {
       "Xmp.Camera.IrradianceScaleToSIUnits", "Exif.Image.Model", "Exif.Image.Software", "Xmp.Camera.CalibrationPicture",
       "Xmp.Camera.Albedo", "Xmp.Camera.ReflectArea", "Xmp.MicaSense.PanelSerial", "Xmp.Camera.PanelSerial",
       "Xmp.drone-dji.Irradiance", "Xmp.Camera.Irradiance", "Xmp.drone-dji.SensorGainAdjustment",
-      "Exif.Photo.DateTimeOriginal", "Exif.Photo.SubSecTimeOriginal", "Xmp.exif.DateTimeOriginal"};
+      "Exif.Photo.DateTimeOriginal", "Exif.Photo.SubSecTimeOriginal", "Xmp.exif.DateTimeOriginal",
+      "Exif.Photo.SubSecTime", "Xmp.DLS.DirectIrradiance", "Xmp.DLS.ScatteredIrradiance",
+      "Xmp.DLS.SpectralIrradiance", "Xmp.DLS.Yaw", "Xmp.DLS.Pitch", "Xmp.DLS.Roll"};
   return keys;
 }
 
@@ -368,19 +387,23 @@ inline void read_time(const std::map<std::string, std::string>& kv, CaptureMeta&
     }
     m.time_s = *t;
     m.source["time"] = key;
-    if (std::string_view(key) == "Exif.Photo.DateTimeOriginal")
-      if (const auto sub = kv.find("Exif.Photo.SubSecTimeOriginal"); sub != kv.end()) {
-        // "25" is a quarter second: the digits are a decimal fraction.
-        const std::string_view d = detail::trim(sub->second);
-        double frac = 0.0, scale = 0.1;
-        bool ok = !d.empty() && d.size() <= 9;
-        for (char c : d) {
-          if (c < '0' || c > '9') ok = false;
-          frac += (c - '0') * scale;
-          scale *= 0.1;
-        }
-        if (ok) *m.time_s += frac;
-      }
+    if (std::string_view(key) != "Exif.Photo.DateTimeOriginal") return;
+    auto sub = kv.find("Exif.Photo.SubSecTimeOriginal");
+    if (sub == kv.end()) sub = kv.find("Exif.Photo.SubSecTime");
+    if (sub == kv.end()) return;
+    // "25" is a quarter second: the digits are a decimal fraction. MicaSense writes a sign where
+    // the second was rounded up ("-279654": 0.279654 s before the stated second).
+    std::string_view d = detail::trim(sub->second);
+    const bool negative = !d.empty() && d[0] == '-';
+    if (negative) d.remove_prefix(1);
+    double frac = 0.0, scale = 0.1;
+    bool ok = !d.empty() && d.size() <= 9;
+    for (char c : d) {
+      if (c < '0' || c > '9') ok = false;
+      frac += (c - '0') * scale;
+      scale *= 0.1;
+    }
+    if (ok) *m.time_s += negative ? -frac : frac;
     return;
   }
 }
@@ -429,6 +452,68 @@ inline void read_gps(const std::map<std::string, std::string>& kv, CaptureMeta& 
   }
   m.gps = std::array<double, 3>{*lat, *lon, alt.value_or(0.0)};
   m.source["gps"] = lat_key;
+}
+
+/// Where a MicaSense file `kv` gave no level-ground irradiance (m.irradiance unset: no
+/// HorizontalIrradiance, or one from firmware that wrote it wrongly), compute it from what the
+/// light sensor recorded and the sun's place at m.gps and m.time_s (taken as UTC): a DLS 2's direct
+/// and scattered parts, else a DLS 1's tilted reading and attitude (msgs/io/light_sensor_tilt.hpp).
+/// Sets m.irradiance (W/m^2/nm), or says in m.irradiance_problem why it could not. A malformed
+/// value is an IoError naming `file` and the key.
+inline void level_light_sensor(const std::map<std::string, std::string>& kv, const std::filesystem::path& file,
+                               CaptureMeta& m) {
+  if (m.irradiance) return;
+  const auto value = [&](const char* key, bool angle) -> std::optional<double> {
+    const auto it = kv.find(key);
+    if (it == kv.end()) return std::nullopt;
+    const auto v = detail::parse_number_list(it->second, 1);
+    if (!v || (!angle && (*v)[0] < 0))
+      fail(file, key, cat("value '", it->second.substr(0, 80), "' is not ", angle ? "an angle in radians" : "an irradiance (>= 0)",
+                          " (skip the metadata with --radiometry none)"));
+    return (*v)[0];
+  };
+  const auto direct = value("Xmp.DLS.DirectIrradiance", false), scattered = value("Xmp.DLS.ScatteredIrradiance", false);
+  const auto tilted = value("Xmp.DLS.SpectralIrradiance", false);
+  const bool dls2 = direct && scattered && *direct > 0 && *scattered > 0;
+  if (!dls2 && !(tilted && *tilted > 0)) return;  // no reading to level
+  const bool horizontal = kv.count("Xmp.Camera.HorizontalIrradiance") || kv.count("Xmp.DLS.HorizontalIrradiance");
+  double scale = horizontal ? 0.01 : 1.0;  // MicaSense's units of a DLS 2 and a DLS 1
+  if (const auto sc = kv.find("Xmp.Camera.IrradianceScaleToSIUnits"); sc != kv.end()) {
+    const auto v = detail::parse_number(sc->second);
+    if (!v || !(*v > 0))
+      fail(file, sc->first, cat("value '", sc->second.substr(0, 80), "' is not a scale factor (> 0)",
+                                " (skip the metadata with --radiometry none)"));
+    scale = *v;
+  }
+  const std::string before = m.irradiance_problem.empty() ? "" : m.irradiance_problem + "; ";
+  const std::string what = dls2 ? "its DLS 2's direct and scattered light" : "its DLS 1's tilted reading";
+  const auto give_up = [&](const std::string& why) {
+    m.irradiance_problem = cat(before, what, " could not be levelled: ", why);
+  };
+  if (!m.gps) return give_up(m.gps_problem.empty() ? "the file has no position" : m.gps_problem);
+  if (!m.time_s) return give_up(m.time_problem.empty() ? "the file has no capture time" : m.time_problem);
+  const SunPosition sun = sun_position(*m.time_s, (*m.gps)[0], (*m.gps)[1]);
+  double theta = 0.0;
+  if (!dls2) {
+    const auto yaw = value("Xmp.DLS.Yaw", true), pitch = value("Xmp.DLS.Pitch", true), roll = value("Xmp.DLS.Roll", true);
+    if (!yaw || !pitch || !roll) return give_up("the file has no attitude of the sensor (Xmp.DLS.Yaw, Pitch, Roll)");
+    theta = sun_sensor_angle(sun, *yaw, *pitch, *roll);
+  }
+  if (const std::string why = levelling_problem(sun.elevation, theta); !why.empty()) return give_up(why);
+  const double level = dls2 ? level_direct_scattered(*direct * scale, *scattered * scale, sun.elevation)
+                            : level_tilted_reading(*tilted * scale, theta, sun.elevation);
+  if (!(level > 0) || !std::isfinite(level)) return give_up(cat("it gives ", level, " W/m^2/nm"));
+  constexpr double deg = 180.0 / std::numbers::pi;
+  m.irradiance = level;
+  m.irradiance_si = true;
+  m.sun_elevation_deg = sun.elevation * deg;
+  if (dls2) {
+    m.source["irradiance"] = "Xmp.DLS.DirectIrradiance x sin(sun elevation) + Xmp.DLS.ScatteredIrradiance";
+  } else {
+    m.sun_sensor_angle_deg = theta * deg;
+    m.source["irradiance"] = "Xmp.DLS.SpectralIrradiance levelled with Xmp.DLS.Yaw/Pitch/Roll";
+  }
+  m.irradiance_problem.clear();
 }
 
 /// Turn the key -> value map of one file into metadata. `file` names the image in errors.
@@ -649,6 +734,7 @@ inline CaptureMeta capture_meta_from_exiv2(const std::map<std::string, std::stri
   }
   read_gps(kv, m);
   read_time(kv, m);
+  if (!dji) level_light_sensor(kv, file, m);
   return m;
 }
 

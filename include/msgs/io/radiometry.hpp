@@ -18,7 +18,9 @@
 //   R(x, y) = pi * a1 * (DN - black_level) / 2^bits / (exposure_s * gain * falloff * row(y) * E)
 //
 // with a1 MicaSense's radiometric calibration (radiance in W/m^2/sr/nm) and E the horizontal
-// irradiance (W/m^2/nm) that the DLS 2 recorded with the capture. Every step is then required.
+// irradiance (W/m^2/nm) that the DLS 2 recorded with the capture, or that msgs levelled from what
+// the light sensor recorded (msgs/io/light_sensor_tilt.hpp: a DLS 1's tilted reading, a DLS 2
+// whose firmware wrote HorizontalIrradiance wrongly). Every step is then required.
 //
 // Reflectance from a calibration panel (`--radiometry panel`, as MicaSense's batch processing
 // does): a picture of a panel of known reflectance rho (its albedo) gives the band's irradiance in
@@ -112,8 +114,8 @@ inline BandPlan plan_band(const std::vector<CaptureMeta>& metas, const std::vect
     if (!lacking.empty()) plan.missing[tag] = std::move(lacking);
     return plan.missing.count(tag) == 0 && !metas.empty();
   };
-  const bool sun = calibration == Calibration::sun_sensor || calibration == Calibration::panel_and_sun_sensor ||
-                   calibration == Calibration::sun_sensor_relative;
+  // The modes that take the light sensor's reading in any unit (sun_sensor has its own branch).
+  const bool sun = calibration == Calibration::panel_and_sun_sensor || calibration == Calibration::sun_sensor_relative;
   const bool panel = calibration == Calibration::panel || calibration == Calibration::panel_and_sun_sensor;
   // A camera that writes no black level anywhere (the Parrot Sequoia) has none to subtract, which
   // a panel calibration can live with.

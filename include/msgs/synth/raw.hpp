@@ -15,7 +15,9 @@
 //              scaled to the image height; a1 such that pi x radiance / irradiance gives back the
 //              scene's values), Camera:HorizontalIrradiance + Camera:IrradianceScaleToSIUnits (a
 //              DLS 2's reading of the capture's sunlight, see RawOptions::light_variation and
-//              dls_bias),
+//              dls_bias; with RawOptions::dls1 a DLS 1's tilted reading and attitude instead,
+//              DLS:SpectralIrradiance and DLS:Yaw/Pitch/Roll, with Camera:Irradiance and
+//              Camera:IrradianceYaw/Pitch/Roll in degrees as the real camera repeats them),
 //              exif:ExposureTime, exif:ISOSpeedRatings, exif:FocalLength, exif:DateTimeOriginal,
 //              exif:FocalPlaneXResolution/YResolution/ResolutionUnit (4 = mm). Real MicaSense files
 //              keep exposure, ISO, focal length and black level in EXIF IFDs instead; the importer
@@ -72,11 +74,14 @@
 #include <vector>
 
 #include "../io/calibration_panel.hpp"
+#include "../io/capture_meta.hpp"
 #include "../io/error.hpp"
 #include "../io/file.hpp"
 #include "../io/image_io.hpp"
+#include "../io/light_sensor_tilt.hpp"
 #include "../io/match_pairs.hpp"
 #include "../io/radiometry.hpp"
+#include "../io/sun_position.hpp"
 #include "dataset.hpp"
 #include "render.hpp"
 #include "scene.hpp"
@@ -103,6 +108,9 @@ struct RawOptions {
   /// The sunlight grows linearly in time by this fraction from the first capture written to the
   /// last (the sun climbing); -0.5 .. 1, 0 keeps it level.
   double light_drift = 0.0;
+  /// MicaSense only: a RedEdge-M's first light sensor, which records its tilted reading and its
+  /// attitude instead of HorizontalIrradiance (see dls1_reading).
+  bool dls1 = false;
   bool overwrite = false;
 };
 
@@ -167,6 +175,35 @@ inline std::vector<RawBand> raw_bands(std::string_view camera) {
 inline int raw_capture_seconds(int capture, int flight_captures) {
   const int flight = 10 * 3600 + 2 * capture;
   return capture < 0 ? flight - 300 : capture >= flight_captures ? flight + 60 : flight;
+}
+
+/// The attitude of a DLS 1 (radians, north-east-down; msgs/io/light_sensor_tilt.hpp).
+struct DlsAttitude {
+  double yaw = 0, pitch = 0, roll = 0;
+};
+
+/// The light sensor's attitude at capture `capture`: on flight lines that turn back at every
+/// capture (headings 20 and 200 degrees), pitched 8 degrees forward, rolled a little; level on
+/// the ground for a panel capture.
+inline DlsAttitude dls1_attitude(int capture, bool panel) {
+  constexpr double deg = std::numbers::pi / 180.0;
+  if (panel) return {60.0 * deg, 0.0, 0.0};
+  return {(capture % 2 == 0 ? 20.0 : 200.0) * deg, -8.0 * deg, (capture % 3 - 1) * 2.0 * deg};
+}
+
+/// What a DLS 1 with attitude `a` reads under a clear sky that gives `level` irradiance on level
+/// ground, at `seconds` after midnight UTC of 2024-06-01 above `position` (metres east, north, up
+/// of the scene's origin, as add_gps places it): the direct part D and the scattered D / 6 that
+/// make `level` with the sun's elevation, through the diffuser at the sun's angle to the sensor.
+inline double dls1_reading(double level, const DlsAttitude& a, int seconds, const Vec3f& position) {
+  const auto [lat, lon, alt] = io::local_to_gps({double(position.x()), double(position.y()), 20.0}, 51.98, 5.66);
+  (void)alt;
+  const double t = *io::parse_date_time("2024:06:01 00:00:00") + seconds;
+  const io::SunPosition sun = io::sun_position(t, lat, lon);
+  const double scattered = 1.0 / io::kDirectToScattered;
+  const double direct = level / (std::sin(sun.elevation) + scattered);
+  const double theta = io::sun_sensor_angle(sun, a.yaw, a.pitch, a.roll);
+  return io::diffuser_transmission(theta) * direct * (std::cos(theta) + scattered);
 }
 
 /// File name of band `b` of capture `capture` (0-based; -1 the panel capture before the flight,
@@ -319,7 +356,8 @@ inline std::string xmp_packet(const std::vector<std::pair<std::string, std::stri
       "    xmlns:exif=\"http://ns.adobe.com/exif/1.0/\"\n"
       "    xmlns:tiff=\"http://ns.adobe.com/tiff/1.0/\"\n"
       "    xmlns:drone-dji=\"http://www.dji.com/drone-dji/1.0/\"\n"
-      "    xmlns:MicaSense=\"http://micasense.com/MicaSense/1.0/\"";
+      "    xmlns:MicaSense=\"http://micasense.com/MicaSense/1.0/\"\n"
+      "    xmlns:DLS=\"http://micasense.com/DLS/1.0/\"";
   for (const auto& [k, v] : attrs) s += "\n    " + k + "=\"" + v + "\"";
   s += ">\n";
   for (const auto& [k, v] : elems) s += "   <" + k + ">" + v + "</" + k + ">\n";
@@ -390,6 +428,7 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
   if (!(opt.dls_bias >= -0.5 && opt.dls_bias <= 1.0)) throw std::invalid_argument("the light sensor's bias must be -0.5 .. 1");
   if (opt.panel_captures < 0 || opt.panel_captures > 100) throw std::invalid_argument("panel captures must be 0 .. 100");
   if (!(opt.light_drift >= -0.5 && opt.light_drift <= 1.0)) throw std::invalid_argument("the light drift must be -0.5 .. 1");
+  if (opt.dls1 && opt.camera != "micasense") throw std::invalid_argument("a DLS 1 comes with MicaSense cameras only");
   if (opt.captures > 0) preset.captures = opt.captures;
   if (opt.width > 0) {
     preset.ms_width = opt.width;
@@ -551,8 +590,24 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
           const double e_ref = raw_irradiance(b.wavelength_nm);
           const double a1 = 65536.0 * e_ref / (std::numbers::pi * b.sensitivity);
           elems.emplace_back("MicaSense:RadiometricCalibration", detail::rdf_seq({a1, row_a2, row_a3}));
-          attrs.emplace_back("Camera:HorizontalIrradiance", detail::g10(e_ref * light * (1.0 + opt.dls_bias) / 0.01));
-          attrs.emplace_back("Camera:IrradianceScaleToSIUnits", "0.01");
+          const double level = e_ref * light * (1.0 + opt.dls_bias);
+          if (opt.dls1) {
+            const DlsAttitude a = dls1_attitude(ci, panel);
+            const double reading = dls1_reading(level, a, raw_capture_seconds(ci, sum.captures),
+                                                cap.cameras[static_cast<std::size_t>(Band::D)].position());
+            constexpr double deg = 180.0 / std::numbers::pi;
+            attrs.emplace_back("DLS:SpectralIrradiance", detail::g10(reading));
+            attrs.emplace_back("DLS:Yaw", detail::g10(a.yaw));
+            attrs.emplace_back("DLS:Pitch", detail::g10(a.pitch));
+            attrs.emplace_back("DLS:Roll", detail::g10(a.roll));
+            attrs.emplace_back("Camera:Irradiance", detail::g10(reading));
+            attrs.emplace_back("Camera:IrradianceYaw", detail::g10(a.yaw * deg));
+            attrs.emplace_back("Camera:IrradiancePitch", detail::g10(a.pitch * deg));
+            attrs.emplace_back("Camera:IrradianceRoll", detail::g10(a.roll * deg));
+          } else {
+            attrs.emplace_back("Camera:HorizontalIrradiance", detail::g10(level / 0.01));
+            attrs.emplace_back("Camera:IrradianceScaleToSIUnits", "0.01");
+          }
           if (panel) {  // the inner area of the panel, as the camera marks it: whole pixels
             std::string area;
             for (const auto& c : detail::panel_area(cam.width, cam.height, pdx, pdy))
