@@ -203,6 +203,26 @@ double median_ratio_to_truth(const fs::path& dir, const fs::path& ds, const Json
   return median(ratio);
 }
 
+/// `msgs import --radiometry reflectance` of dir/raw (a 5-capture MicaSense set written with `opt`)
+/// into dir/ds: its log and transforms.json, once every one of the 20 frames was normalised with
+/// its irradiance from `irradiance_key` and gives the scene's values, the reflectances, back within
+/// 1%, whatever its exposure and light.
+std::pair<std::string, Json> reflectance_import(const fs::path& dir, const msgs::synth::RawOptions& opt,
+                                                const std::string& irradiance_key) {
+  const auto log_run = import_ok(dir, "ds", "--radiometry reflectance");
+  REQUIRE_MESSAGE(log_run.first == 0, log_run.second);
+  Json tf = Json::parse(slurp(dir / "ds" / "transforms.json"));
+  const msgs::synth::SynthScene scene = msgs::synth::make_scene(raw_set_preset(opt), opt.seed);
+  REQUIRE(tf["frames"].size() == 20);
+  for (const auto& f : tf["frames"]) {
+    REQUIRE(f["radiometry"]["applied"] == true);
+    CHECK(f["radiometry"]["metadata_keys"]["irradiance"] == irradiance_key);
+    CHECK_MESSAGE(median_ratio_to_truth(dir, dir / "ds", f, scene, opt) == doctest::Approx(1.0).epsilon(0.01).scale(0),
+                  f["source"].get<std::string>());
+  }
+  return {log_run.second, tf};
+}
+
 /// A frame of an imported synthetic flight against the scene's camera that rendered it.
 struct FrameError {
   std::string source, band, pose;  ///< as transforms.json has them
@@ -499,28 +519,17 @@ TEST_CASE("msgs import --radiometry reflectance: the DLS 2 takes out changing su
   const auto dir_or = colmap_case("reflectance", "reflectance from the light sensor", opt);
   if (!dir_or) return;
   const fs::path& dir = *dir_or;
-  const auto log_run = import_ok(dir, "ds", "--radiometry reflectance");
-  const int rc = log_run.first;
-  const std::string& log = log_run.second;
-  REQUIRE_MESSAGE(rc == 0, log);
+  const auto result = reflectance_import(dir, opt, "Xmp.Camera.HorizontalIrradiance");
+  const std::string& log = result.first;
+  const Json& tf = result.second;
   CHECK(!leftovers(dir, "ds"));
   CHECK_MESSAGE(log.find("MS_NIR: reflectance under ") != std::string::npos, log);
-  const Json tf = Json::parse(slurp(dir / "ds" / "transforms.json"));
-  const msgs::synth::SynthScene scene = msgs::synth::make_scene(raw_set_preset(opt), opt.seed);
-  REQUIRE(tf["frames"].size() == 20);
   double e_lo = 1e9, e_hi = 0;
   for (const auto& f : tf["frames"]) {
-    const auto& rad = f["radiometry"];
-    REQUIRE(rad["applied"] == true);
-    CHECK(rad["metadata_keys"]["irradiance"] == "Xmp.Camera.HorizontalIrradiance");
-    CHECK(rad["formula"].get<std::string>().rfind("reflectance", 0) == 0);
-    const double e = rad["irradiance_w_m2_nm"].get<double>();
+    CHECK(f["radiometry"]["formula"].get<std::string>().rfind("reflectance", 0) == 0);
+    const double e = f["radiometry"]["irradiance_w_m2_nm"].get<double>();
     e_lo = std::min(e_lo, e);
     e_hi = std::max(e_hi, e);
-    // The scene's values are the reflectances: every image, whatever its exposure and light,
-    // gives them back.
-    CHECK_MESSAGE(median_ratio_to_truth(dir, dir / "ds", f, scene, opt) == doctest::Approx(1.0).epsilon(0.01).scale(0),
-                  f["source"].get<std::string>());
   }
   CHECK(e_hi / e_lo > 1.2);  // the light did change
 
@@ -546,31 +555,21 @@ TEST_CASE("msgs import --radiometry reflectance: the DLS 2 takes out changing su
 TEST_CASE("msgs import --radiometry reflectance: a DLS 1's tilted readings are levelled for the sun") {
   // A RedEdge-M with the first light sensor: the drone pitched 8 degrees forward on lines that
   // turn back at every capture, so the sensor faces the sun more on one heading than on the other.
+  // Levelled, every image gives the scene's reflectances back, whichever way the drone flew.
   msgs::synth::RawOptions opt = small_micasense_set();
   opt.light_variation = 0.25;
   opt.dls1 = true;
   const auto dir_or = colmap_case("reflectance_dls1", "levelling a DLS 1's readings", opt);
   if (!dir_or) return;
-  const fs::path& dir = *dir_or;
-  const auto log_run = import_ok(dir, "ds", "--radiometry reflectance");
-  const int rc = log_run.first;
-  const std::string& log = log_run.second;
-  REQUIRE_MESSAGE(rc == 0, log);
+  const auto result = reflectance_import(*dir_or, opt, "Xmp.DLS.SpectralIrradiance levelled with Xmp.DLS.Yaw/Pitch/Roll");
+  const std::string& log = result.first;
+  const Json& tf = result.second;
   CHECK_MESSAGE(log.find("MS_NIR: 5 of 5 light-sensor readings levelled for the sun, 55.0 degrees high") != std::string::npos,
                 log);
-  const Json tf = Json::parse(slurp(dir / "ds" / "transforms.json"));
-  const msgs::synth::SynthScene scene = msgs::synth::make_scene(raw_set_preset(opt), opt.seed);
-  REQUIRE(tf["frames"].size() == 20);
   double angle_lo = 180, angle_hi = 0;
   for (const auto& f : tf["frames"]) {
-    const auto& rad = f["radiometry"];
-    REQUIRE(rad["applied"] == true);
-    CHECK(rad["metadata_keys"]["irradiance"] == "Xmp.DLS.SpectralIrradiance levelled with Xmp.DLS.Yaw/Pitch/Roll");
-    angle_lo = std::min(angle_lo, rad["sun_sensor_angle_deg"].get<double>());
-    angle_hi = std::max(angle_hi, rad["sun_sensor_angle_deg"].get<double>());
-    // Levelled, every image gives the scene's reflectances back, whichever way the drone flew.
-    CHECK_MESSAGE(median_ratio_to_truth(dir, dir / "ds", f, scene, opt) == doctest::Approx(1.0).epsilon(0.01).scale(0),
-                  f["source"].get<std::string>());
+    angle_lo = std::min(angle_lo, f["radiometry"]["sun_sensor_angle_deg"].get<double>());
+    angle_hi = std::max(angle_hi, f["radiometry"]["sun_sensor_angle_deg"].get<double>());
   }
   // The headings put the sun 30 and 41 degrees from the sensor: taken as it was, the reading of
   // one heading would be (cos 30 + 1/6) / (cos 41 + 1/6) = 1.13 times the other's.
@@ -623,7 +622,9 @@ TEST_CASE("msgs import --radiometry panel, panel+dls: the panel capture is set a
   // The log's percentiles of each band are those of the images written (to their 0.001 steps).
   const auto& pct = tf["msgs_import"]["reflectance_percentiles"];
   REQUIRE(pct.size() == 4);
-  for (auto& [band, v] : values) {
+  for (auto& entry : values) {  // (no structured binding: CAPTURE names it in a lambda, see above)
+    const std::string& band = entry.first;
+    std::vector<double>& v = entry.second;
     std::sort(v.begin(), v.end());
     CAPTURE(band);
     CHECK(std::abs(pct[band]["p50"].get<double>() - v[v.size() / 2]) <= 0.0011);
