@@ -30,6 +30,7 @@
 #include <msgs/io/dataset.hpp>
 #include <msgs/io/file.hpp>
 #include <msgs/io/image_io.hpp>
+#include <msgs/io/light_sensor_heading.hpp>
 #include <msgs/io/match_pairs.hpp>
 #include <msgs/io/model_alignment.hpp>
 #include <msgs/io/panel_list.hpp>
@@ -56,6 +57,7 @@ constexpr const char* kUsage =
     "                   [--matching exhaustive|window|gps]\n"
     "                   [--window N] [--neighbours K] [--sift-threshold T] [--ba-tolerance X]\n"
     "                   [--merge-models on|off] [--rig on|off] [--allow-partial] [--downscales N]\n"
+    "                   [--light-sensor-heading report|correct]\n"
     "                   [--force]\n"
     "                   [--colmap BIN] [--exiv2 BIN] [--keep-work]\n"
     "\n"
@@ -163,6 +165,12 @@ constexpr const char* kUsage =
     "  --allow-partial     drop images that have no pose (with a warning) instead of failing\n"
     "  --downscales N      also write copies downscaled by 2, 4, .. 2^N (box filter) into images_2/,\n"
     "                      images_4/, .. (0 to 4; default 0), for `msgs train --images images_4`\n"
+    "  --light-sensor-heading H  report (default) or correct: with reflectance, sun-sensor and\n"
+    "                      panel+dls, each band's light-sensor readings are fitted as a slow change\n"
+    "                      in time plus a term in the drone's heading (a sensor that tilts with\n"
+    "                      the drone reads more facing the sun); the log gives the heading's effect\n"
+    "                      and warns where it stands above the noise, and correct divides it out\n"
+    "                      of the readings (6 captures and headings 90 degrees apart at least)\n"
     "  --force             replace an existing --out once the new dataset is complete\n"
     "  --colmap BIN        COLMAP executable (default: colmap on PATH)\n"
     "  --exiv2 BIN         exiv2 executable (default: exiv2 on PATH)\n"
@@ -312,6 +320,66 @@ BandImage read_band_image(const fs::path& src, const std::string& band) {
   BandImage b{msgs::io::read_image(src), bits == 16 ? 65535.0 : 255.0};
   if (b.raw.channels != 1) fail(src, cat("band ", band, " needs a single-channel image, this one has ", b.raw.channels));
   return b;
+}
+
+/// The heading check of `band`'s light-sensor readings (items `idx`, flight captures only;
+/// msgs/io/light_sensor_heading.hpp), logged; with `correct`, a significant heading effect is
+/// divided out of the readings. What was found as JSON for transforms.json (null where the band's
+/// images carry no reading to check).
+nlohmann::ordered_json check_light_sensor_heading(const std::string& band, const std::vector<std::size_t>& idx,
+                                                  std::vector<Item>& items, bool correct) {
+  std::vector<double> reading, time_s, heading;
+  std::size_t without = 0;
+  for (std::size_t i : idx) {
+    const msgs::io::CaptureMeta& m = items[i].meta;
+    if (!m.irradiance) return nullptr;  // (the radiometry plan says what is missing)
+    if (!m.time_s || !m.heading_deg) {
+      ++without;
+      continue;
+    }
+    reading.push_back(*m.irradiance);
+    time_s.push_back(*m.time_s);
+    heading.push_back(*m.heading_deg);
+  }
+  nlohmann::ordered_json j;
+  if (without > 0) {
+    std::printf("  %s: the light sensor's readings not checked against the heading: %zu of %zu images have no"
+                " heading or time (Xmp.drone-dji.FlightYawDegree, Xmp.DLS.Yaw; Exif.Photo.DateTimeOriginal)\n",
+                band.c_str(), without, idx.size());
+    j["problem"] = cat(without, " images without a heading or time");
+    return j;
+  }
+  const msgs::io::HeadingFit fit = msgs::io::fit_heading_bias(reading, time_s, heading);
+  j["captures"] = fit.captures;
+  if (!fit.problem.empty()) {
+    std::printf("  %s: the light sensor's readings not checked against the heading: %s\n", band.c_str(),
+                fit.problem.c_str());
+    j["problem"] = fit.problem;
+    return j;
+  }
+  const bool significant = fit.significant();
+  const bool divided = correct && significant;
+  if (divided)
+    for (std::size_t k = 0; k < idx.size(); ++k) *items[idx[k]].meta.irradiance /= fit.heading_factor[k];
+  std::printf("  %s: the light sensor reads %.1f%% (+- %.1f%%) higher flying %.0f degrees than flying %.0f degrees,"
+              " the change in time taken out (%zu captures, %.1f%% scatter)%s\n",
+              band.c_str(), 100.0 * (fit.ratio - 1.0), 100.0 * fit.ratio * fit.ratio_log_se, fit.high_heading_deg,
+              fit.low_heading_deg, fit.captures, 100.0 * fit.scatter,
+              divided        ? ": divided out"
+              : significant ? ""
+                            : ": within the noise, kept");
+  if (significant && !correct)
+    std::printf("  warning: %s: images taken on one heading come out %.1f%% darker than on the other;"
+                " --light-sensor-heading correct divides the heading's part out of the readings\n",
+                band.c_str(), 100.0 * (fit.ratio - 1.0));
+  j["ratio"] = fit.ratio;
+  j["ratio_log_standard_error"] = fit.ratio_log_se;
+  j["high_heading_deg"] = fit.high_heading_deg;
+  j["low_heading_deg"] = fit.low_heading_deg;
+  j["scatter"] = fit.scatter;
+  j["significant"] = significant;
+  j["divided_out"] = divided;
+  return j;
 }
 
 /// The panel pictures (indices into `panels`) that can calibrate `band`: those the camera read
@@ -831,7 +899,7 @@ int run_import(const std::vector<std::string>& argv) {
   const msgs::cli::Args args(argv,
                              {"images", "out", "camera", "bands", "eval-every", "camera-model", "radiometry", "panel-albedo", "panels", "matching",
                               "window", "neighbours", "sift-threshold", "ba-tolerance", "merge-models", "rig", "colmap", "exiv2",
-                              "downscales"},
+                              "downscales", "light-sensor-heading"},
                              {"force", "allow-partial", "keep-work", "help"});
   if (args.flag("help")) {
     std::fputs(kUsage, stdout);
@@ -880,6 +948,14 @@ int run_import(const std::vector<std::string>& argv) {
     throw msgs::cli::UsageError("--panel-albedo goes with --radiometry panel or panel+dls");
   const long downscales = args.integer("downscales", 0);
   if (downscales < 0 || downscales > 4) throw msgs::cli::UsageError("--downscales expects 0 to 4");
+  const std::string heading_mode = args.get("light-sensor-heading", "report");
+  if (heading_mode != "report" && heading_mode != "correct")
+    throw msgs::cli::UsageError("--light-sensor-heading expects report or correct, got '" + heading_mode + "'");
+  // The modes that divide the images by the light sensor's readings.
+  const bool uses_light_sensor = calibration == msgs::io::Calibration::sun_sensor ||
+                                 calibration == msgs::io::Calibration::panel_and_sun_sensor || band_ratios;
+  if (heading_mode == "correct" && !uses_light_sensor)
+    throw msgs::cli::UsageError("--light-sensor-heading correct goes with --radiometry reflectance, sun-sensor or panel+dls");
   const std::string matching = args.get("matching", "exhaustive");
   if (matching != "exhaustive" && matching != "window" && matching != "gps")
     throw msgs::cli::UsageError("--matching expects exhaustive, window or gps, got '" + matching + "'");
@@ -1082,12 +1158,16 @@ int run_import(const std::vector<std::string>& argv) {
   std::map<std::string, std::vector<std::size_t>> by_band;
   for (std::size_t i = 0; i < items.size(); ++i) by_band[items[i].band].push_back(i);
   nlohmann::ordered_json panel_report = nlohmann::ordered_json::array();  // what each panel picture gave
+  nlohmann::ordered_json heading_report = nlohmann::ordered_json::object();  // band -> the heading check
   double all_bands_max = 0.0;  // sun-sensor: the brightest value of any band, and its band
   std::string brightest_band;
   for (const auto& [band, idx] : by_band) {
     if (band == "D") continue;
     msgs::io::RadiometrySteps steps;
     std::vector<std::size_t> band_panels;  // the panel pictures of this band that calibrate it
+    if (have_meta && uses_light_sensor)
+      if (auto j = check_light_sensor_heading(band, idx, items, heading_mode == "correct"); !j.is_null())
+        heading_report[band] = j;
     if (have_meta && radiometry != "none") {
       std::vector<msgs::io::CaptureMeta> metas;
       std::vector<fs::path> srcs;
@@ -1438,6 +1518,7 @@ int run_import(const std::vector<std::string>& argv) {
   if (!panel_report.empty()) meta_json["calibration_panels"] = panel_report;
   if (reflectance) meta_json["reflectance_percentiles"] = reflectance_percentiles;
   if (band_ratios) meta_json["sun_sensor_common_scale"] = {{"scale", common}, {"brightest_band", brightest_band}};
+  if (!heading_report.empty()) meta_json["light_sensor_heading"] = heading_report;
   meta_json["mean_reprojection_error_px"] = opt_number(reproj);
   meta_json["colmap_camera_model"] = model;
   meta_json["colmap_sift_peak_threshold"] = sift_threshold;

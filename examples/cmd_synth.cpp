@@ -17,7 +17,7 @@ constexpr const char* kUsage =
     "usage: msgs synth --preset tiny|small|medium --out DIR [--seed S] [--force]\n"
     "       msgs synth --raw micasense|dji|p4m|sequoia --out DIR [--preset P] [--captures N] [--width W]\n"
     "                  [--light-variation V] [--dls-bias B] [--panel-captures N] [--panel-before]\n"
-    "                  [--light-drift D] [--dls1] [--seed S] [--force]\n"
+    "                  [--light-drift D] [--dls1] [--heading-bias H] [--seed S] [--force]\n"
     "\n"
     "Ray-trace a procedural outdoor scene (lawn, soil, trees, solar panels, pond, painted pad) seen\n"
     "by a 5-camera drone rig (RGB + G, R, RE, NIR) and write it in the public multi-spectral dataset\n"
@@ -55,7 +55,11 @@ constexpr const char* kUsage =
     "  --dls1       MicaSense files as a RedEdge-M with the first light sensor writes them: its\n"
     "               tilted reading (DLS:SpectralIrradiance) and attitude (DLS:Yaw/Pitch/Roll) under a\n"
     "               clear sky, the drone pitched 8 degrees forward on flight lines that turn back\n"
-    "               at every capture, and no HorizontalIrradiance (`msgs import` levels the reading)\n";
+    "               at every capture, and no HorizontalIrradiance (`msgs import` levels the reading)\n"
+    "  --heading-bias H  the light sensor (MicaSense, DJI) reads 1 + H cos(yaw - 20 deg) x the sunlight\n"
+    "               (-0.5 to 0.5; default 0), as a sensor that sits off the drone's centre or is shaded\n"
+    "               by its body does: flight lines that turn back make it alternate; `msgs import`\n"
+    "               reports it and --light-sensor-heading correct divides it out\n";
 
 int run_raw(const msgs::cli::Args& args) {
   msgs::synth::RawOptions opt;
@@ -73,6 +77,7 @@ int run_raw(const msgs::cli::Args& args) {
   opt.panel_before = args.flag("panel-before");
   opt.light_drift = args.number("light-drift", 0.0);
   opt.dls1 = args.flag("dls1");
+  opt.heading_bias = args.number("heading-bias", 0.0);
   opt.overwrite = args.flag("force");
   const std::string out = args.require("out");
   msgs::synth::RawSummary s;
@@ -100,7 +105,8 @@ int run_raw(const msgs::cli::Args& args) {
 int run_synth(const std::vector<std::string>& argv) {
   const msgs::cli::Args args(
       argv,
-      {"preset", "out", "seed", "raw", "captures", "width", "light-variation", "dls-bias", "panel-captures", "light-drift"},
+      {"preset", "out", "seed", "raw", "captures", "width", "light-variation", "dls-bias", "panel-captures", "light-drift",
+       "heading-bias"},
       {"force", "help", "panel-before", "dls1"});
   if (args.flag("help")) {
     std::fputs(kUsage, stdout);
@@ -108,7 +114,8 @@ int run_synth(const std::vector<std::string>& argv) {
   }
   if (!args.positional().empty()) throw msgs::cli::UsageError("unexpected argument '" + args.positional()[0] + "'");
   if (args.has("raw")) return run_raw(args);
-  for (const char* o : {"captures", "width", "light-variation", "dls-bias", "panel-captures", "light-drift"})
+  for (const char* o :
+       {"captures", "width", "light-variation", "dls-bias", "panel-captures", "light-drift", "heading-bias"})
     if (args.has(o)) throw msgs::cli::UsageError(std::string("--") + o + " needs --raw");
   for (const char* f : {"panel-before", "dls1"})
     if (args.flag(f)) throw msgs::cli::UsageError(std::string("--") + f + " needs --raw");

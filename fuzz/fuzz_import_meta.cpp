@@ -1,6 +1,7 @@
 // fuzz/fuzz_import_meta.cpp
 // libFuzzer target for the pure parts of `msgs import`: exiv2 output parsing
-// (io::parse_capture_meta with GPS positions and the pairs formed from them, a calibration panel's
+// (io::parse_capture_meta with GPS positions and the pairs formed from them, the light sensor's
+// heading check on a flight made of the capture, a calibration panel's
 // area read from a small picture, io::split_exiv2_output), the --panels list (io::parse_panel_list,
 // fed the same text), --bands pattern parsing and file-name
 // recognition (io::parse_band_patterns, io::scan_capture_names with every camera scheme).
@@ -23,6 +24,7 @@
 #include "msgs/io/calibration_panel.hpp"
 #include "msgs/io/capture_meta.hpp"
 #include "msgs/io/capture_names.hpp"
+#include "msgs/io/light_sensor_heading.hpp"
 #include "msgs/io/match_pairs.hpp"
 #include "msgs/io/panel_list.hpp"
 #include "msgs/io/radiometry.hpp"
@@ -48,6 +50,25 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     if (m.irradiance && !(std::isfinite(*m.irradiance) && *m.irradiance > 0)) {
       std::fprintf(stderr, "parse_capture_meta: a light-sensor irradiance that is not positive and finite\n");
       std::abort();
+    }
+    // A heading that was read lies in [0, 360); with the reading and the time, a flight of such
+    // captures on alternate lines fits to a finite effect, or to a reason why not.
+    if (m.heading_deg && !(*m.heading_deg >= 0.0 && *m.heading_deg < 360.0)) {
+      std::fprintf(stderr, "parse_capture_meta: a heading outside [0, 360)\n");
+      std::abort();
+    }
+    if (m.heading_deg && m.irradiance && m.time_s) {
+      std::vector<double> reading, time_s, heading;
+      for (int i = 0; i < 8; ++i) {
+        reading.push_back(*m.irradiance * (i % 2 ? 0.9 : 1.1));
+        time_s.push_back(*m.time_s + 2.0 * i);
+        heading.push_back(*m.heading_deg + (i % 2 ? 180.0 : 0.0));
+      }
+      const io::HeadingFit fit = io::fit_heading_bias(reading, time_s, heading);
+      if (fit.problem.empty() && !(std::isfinite(fit.ratio) && fit.ratio >= 1.0 && fit.heading_factor.size() == 8)) {
+        std::fprintf(stderr, "fit_heading_bias: a fit without a finite ratio of at least 1\n");
+        std::abort();
+      }
     }
     // The plan and the per-frame parameters must also be safe to form (and to check).
     const io::BandPlan plan = io::plan_band({m, m}, {"a.tif", "b.tif"});

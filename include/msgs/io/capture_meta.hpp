@@ -56,6 +56,8 @@
 //   focal plane   Exif.Photo.FocalPlaneXResolution / YResolution / ResolutionUnit and the same in
 //                 Xmp.exif (unit 2 inch, the EXIF default, 3 cm, 4 mm, 5 micrometre)
 //   bit depth     Exif.Image.BitsPerSample
+//   heading       Xmp.drone-dji.FlightYawDegree (DJI, degrees), else Xmp.DLS.Yaw (MicaSense's light
+//                 sensor, radians): which way the drone flew, for msgs/io/light_sensor_heading.hpp
 //   time          Exif.Photo.DateTimeOriginal ("2024:07:30 10:15:32") + Exif.Photo.SubSecTimeOriginal
 //                 or Exif.Photo.SubSecTime (MicaSense's, which may be negative: "-279654"),
 //                 else Xmp.exif.DateTimeOriginal ("2024-07-30T10:15:32.25", a time zone ignored):
@@ -123,6 +125,8 @@ struct CaptureMeta {
   /// firmware wrote HorizontalIrradiance wrongly): the sun's elevation, and for a DLS 1 its angle
   /// from the sensor's normal, in degrees.
   std::optional<double> sun_elevation_deg, sun_sensor_angle_deg;
+  /// Which way the drone flew: degrees clockwise from north, [0, 360).
+  std::optional<double> heading_deg;
   /// Xmp.Camera.CalibrationPicture: 0 a flight image, 1 a panel picture the camera could not
   /// read, 2 one it read (a Sequoia writes 1 or 2 for either).
   int calibration_picture = 0;
@@ -175,7 +179,7 @@ inline const std::vector<std::string>& exiv2_metadata_keys() {
       "Xmp.drone-dji.Irradiance", "Xmp.Camera.Irradiance", "Xmp.drone-dji.SensorGainAdjustment",
       "Exif.Photo.DateTimeOriginal", "Exif.Photo.SubSecTimeOriginal", "Xmp.exif.DateTimeOriginal",
       "Exif.Photo.SubSecTime", "Xmp.DLS.DirectIrradiance", "Xmp.DLS.ScatteredIrradiance",
-      "Xmp.DLS.SpectralIrradiance", "Xmp.DLS.Yaw", "Xmp.DLS.Pitch", "Xmp.DLS.Roll"};
+      "Xmp.DLS.SpectralIrradiance", "Xmp.DLS.Yaw", "Xmp.DLS.Pitch", "Xmp.DLS.Roll", "Xmp.drone-dji.FlightYawDegree"};
   return keys;
 }
 
@@ -731,6 +735,13 @@ inline CaptureMeta capture_meta_from_exiv2(const std::map<std::string, std::stri
     if (b != std::floor(b) || b > 32) bad(*e, "a bit depth (1..32)");
     m.bits_per_sample = int(b);
     m.source["bits_per_sample"] = e->first;
+  }
+  if (auto e = first({"Xmp.drone-dji.FlightYawDegree", "Xmp.DLS.Yaw"})) {
+    const bool radians = e->first == "Xmp.DLS.Yaw";
+    const double v = number(*e, radians ? "a heading in radians" : "a heading in degrees", false);
+    const double d = std::fmod(radians ? v * 180.0 / std::numbers::pi : v, 360.0);
+    m.heading_deg = d < 0 && d + 360.0 < 360.0 ? d + 360.0 : d < 0 ? 0.0 : d;
+    m.source["heading"] = e->first;
   }
   read_gps(kv, m);
   read_time(kv, m);

@@ -14,9 +14,10 @@
 //              records row y brighter by 1 + a2 y / exposure - a3 y; a real RedEdge's values,
 //              scaled to the image height; a1 such that pi x radiance / irradiance gives back the
 //              scene's values), Camera:HorizontalIrradiance + Camera:IrradianceScaleToSIUnits (a
-//              DLS 2's reading of the capture's sunlight, see RawOptions::light_variation and
-//              dls_bias; with RawOptions::dls1 a DLS 1's tilted reading and attitude instead,
-//              DLS:SpectralIrradiance and DLS:Yaw/Pitch/Roll, with Camera:Irradiance and
+//              DLS 2's reading of the capture's sunlight, see RawOptions::light_variation,
+//              dls_bias and heading_bias) and the sensor's attitude (DLS:Yaw/Pitch/Roll, radians,
+//              raw_attitude); with RawOptions::dls1 a DLS 1's tilted reading and attitude instead,
+//              DLS:SpectralIrradiance, with Camera:Irradiance and
 //              Camera:IrradianceYaw/Pitch/Roll in degrees as the real camera repeats them),
 //              exif:ExposureTime, exif:ISOSpeedRatings, exif:FocalLength, exif:DateTimeOriginal,
 //              exif:FocalPlaneXResolution/YResolution/ResolutionUnit (4 = mm). Real MicaSense files
@@ -33,7 +34,7 @@
 //              drone-dji:SensorGainAdjustment (dji_gain_adjustment) and drone-dji:Irradiance, such
 //              that (DN - black) / 2^16 / (exposure gain) x vignetting correction x
 //              SensorGainAdjustment / Irradiance is kDjiReflectanceFactor x the scene's values in
-//              every band.
+//              every band; drone-dji:FlightYawDegree/PitchDegree/RollDegree the drone's attitude.
 //   p4m        DJI_0010.JPG (RGB), DJI_0011.TIF (blue) .. DJI_0015.TIF (NIR), DJI_0020.JPG .., as a
 //              P4 Multispectral numbers them; its tags as the Mavic 3M's, but the black level as
 //              drone-dji:BlackLevel (4096).
@@ -111,6 +112,10 @@ struct RawOptions {
   /// MicaSense only: a RedEdge-M's first light sensor, which records its tilted reading and its
   /// attitude instead of HorizontalIrradiance (see dls1_reading).
   bool dls1 = false;
+  /// In flight the light sensor (MicaSense, DJI) reads (1 + this cos(heading - 20 degrees)) x what it
+  /// would read level: a sensor whose tilt its firmware leaves partly in, so that readings on the
+  /// flight lines of raw_attitude differ by (1 + this) / (1 - this); -0.5 .. 0.5.
+  double heading_bias = 0.0;
   bool overwrite = false;
 };
 
@@ -177,15 +182,16 @@ inline int raw_capture_seconds(int capture, int flight_captures) {
   return capture < 0 ? flight - 300 : capture >= flight_captures ? flight + 60 : flight;
 }
 
-/// The attitude of a DLS 1 (radians, north-east-down; msgs/io/light_sensor_tilt.hpp).
-struct DlsAttitude {
+/// The drone's attitude, which its light sensor shares (radians, north-east-down;
+/// msgs/io/light_sensor_tilt.hpp).
+struct RawAttitude {
   double yaw = 0, pitch = 0, roll = 0;
 };
 
-/// The light sensor's attitude at capture `capture`: on flight lines that turn back at every
-/// capture (headings 20 and 200 degrees), pitched 8 degrees forward, rolled a little; level on
-/// the ground for a panel capture.
-inline DlsAttitude dls1_attitude(int capture, bool panel) {
+/// The attitude at capture `capture`: on flight lines that turn back at every capture (headings
+/// 20 and 200 degrees), pitched 8 degrees forward, rolled a little; level on the ground for a
+/// panel capture.
+inline RawAttitude raw_attitude(int capture, bool panel) {
   constexpr double deg = std::numbers::pi / 180.0;
   if (panel) return {60.0 * deg, 0.0, 0.0};
   return {(capture % 2 == 0 ? 20.0 : 200.0) * deg, -8.0 * deg, (capture % 3 - 1) * 2.0 * deg};
@@ -195,7 +201,7 @@ inline DlsAttitude dls1_attitude(int capture, bool panel) {
 /// ground, at `seconds` after midnight UTC of 2024-06-01 above `position` (metres east, north, up
 /// of the scene's origin, as add_gps places it): the direct part D and the scattered D / 6 that
 /// make `level` with the sun's elevation, through the diffuser at the sun's angle to the sensor.
-inline double dls1_reading(double level, const DlsAttitude& a, int seconds, const Vec3f& position) {
+inline double dls1_reading(double level, const RawAttitude& a, int seconds, const Vec3f& position) {
   const auto [lat, lon, alt] = io::local_to_gps({double(position.x()), double(position.y()), 20.0}, 51.98, 5.66);
   (void)alt;
   const double t = *io::parse_date_time("2024:06:01 00:00:00") + seconds;
@@ -429,6 +435,10 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
   if (opt.panel_captures < 0 || opt.panel_captures > 100) throw std::invalid_argument("panel captures must be 0 .. 100");
   if (!(opt.light_drift >= -0.5 && opt.light_drift <= 1.0)) throw std::invalid_argument("the light drift must be -0.5 .. 1");
   if (opt.dls1 && opt.camera != "micasense") throw std::invalid_argument("a DLS 1 comes with MicaSense cameras only");
+  if (!(opt.heading_bias >= -0.5 && opt.heading_bias <= 0.5))
+    throw std::invalid_argument("the light sensor's heading bias must be -0.5 .. 0.5");
+  if (opt.heading_bias != 0.0 && opt.camera != "micasense" && !dji_camera(opt.camera))
+    throw std::invalid_argument("a heading bias needs a camera with a light sensor (micasense, dji, p4m)");
   if (opt.captures > 0) preset.captures = opt.captures;
   if (opt.width > 0) {
     preset.ms_width = opt.width;
@@ -517,6 +527,10 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
           raw_light(opt.seed, ci, opt.light_variation) *
           (1.0 + opt.light_drift *
                      (t_last > t_first ? (raw_capture_seconds(ci, sum.captures) - t_first) / (t_last - t_first) : 0.0));
+      const RawAttitude att = raw_attitude(ci, panel);
+      // What the light sensor adds to the light: a calibration error, and in flight the heading's part.
+      const double sensor = (1.0 + opt.dls_bias) *
+                            (panel ? 1.0 : 1.0 + opt.heading_bias * std::cos(att.yaw - 20.0 * std::numbers::pi / 180.0));
       sum.min_exposure_s = std::min(sum.min_exposure_s, e.exposure_s);
       sum.max_exposure_s = std::max(sum.max_exposure_s, e.exposure_s);
       sum.min_iso = std::min(sum.min_iso, e.iso);
@@ -579,8 +593,14 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
         // this reading makes DJI's ratio kDjiReflectanceFactor x value in every band.
         const double adjustment = dji_gain_adjustment(b);
         attrs.emplace_back("drone-dji:SensorGainAdjustment", detail::g10(adjustment));
-        attrs.emplace_back("drone-dji:Irradiance", detail::g10(b.sensitivity * adjustment * light * (1.0 + opt.dls_bias) /
-                                                               (65536.0 * kDjiReflectanceFactor)));
+        attrs.emplace_back("drone-dji:Irradiance",
+                           detail::g10(b.sensitivity * adjustment * light * sensor / (65536.0 * kDjiReflectanceFactor)));
+        // The drone's attitude in degrees, yaw in -180 .. 180 as DJI writes it.
+        constexpr double deg = 180.0 / std::numbers::pi;
+        const double yaw = att.yaw * deg;
+        attrs.emplace_back("drone-dji:FlightYawDegree", detail::g10(yaw > 180.0 ? yaw - 360.0 : yaw));
+        attrs.emplace_back("drone-dji:FlightPitchDegree", detail::g10(att.pitch * deg));
+        attrs.emplace_back("drone-dji:FlightRollDegree", detail::g10(att.roll * deg));
       } else {
         elems.emplace_back("exif:ISOSpeedRatings", detail::rdf_seq({double(e.iso)}));
         if (black) attrs.emplace_back("Camera:BlackLevel", detail::g10(black_level));
@@ -590,20 +610,20 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
           const double e_ref = raw_irradiance(b.wavelength_nm);
           const double a1 = 65536.0 * e_ref / (std::numbers::pi * b.sensitivity);
           elems.emplace_back("MicaSense:RadiometricCalibration", detail::rdf_seq({a1, row_a2, row_a3}));
-          const double level = e_ref * light * (1.0 + opt.dls_bias);
+          const double level = e_ref * light * sensor;
+          // The sensor's attitude, which a DLS 2 records too.
+          attrs.emplace_back("DLS:Yaw", detail::g10(att.yaw));
+          attrs.emplace_back("DLS:Pitch", detail::g10(att.pitch));
+          attrs.emplace_back("DLS:Roll", detail::g10(att.roll));
           if (opt.dls1) {
-            const DlsAttitude a = dls1_attitude(ci, panel);
-            const double reading = dls1_reading(level, a, raw_capture_seconds(ci, sum.captures),
+            const double reading = dls1_reading(level, att, raw_capture_seconds(ci, sum.captures),
                                                 cap.cameras[static_cast<std::size_t>(Band::D)].position());
             constexpr double deg = 180.0 / std::numbers::pi;
             attrs.emplace_back("DLS:SpectralIrradiance", detail::g10(reading));
-            attrs.emplace_back("DLS:Yaw", detail::g10(a.yaw));
-            attrs.emplace_back("DLS:Pitch", detail::g10(a.pitch));
-            attrs.emplace_back("DLS:Roll", detail::g10(a.roll));
             attrs.emplace_back("Camera:Irradiance", detail::g10(reading));
-            attrs.emplace_back("Camera:IrradianceYaw", detail::g10(a.yaw * deg));
-            attrs.emplace_back("Camera:IrradiancePitch", detail::g10(a.pitch * deg));
-            attrs.emplace_back("Camera:IrradianceRoll", detail::g10(a.roll * deg));
+            attrs.emplace_back("Camera:IrradianceYaw", detail::g10(att.yaw * deg));
+            attrs.emplace_back("Camera:IrradiancePitch", detail::g10(att.pitch * deg));
+            attrs.emplace_back("Camera:IrradianceRoll", detail::g10(att.roll * deg));
           } else {
             attrs.emplace_back("Camera:HorizontalIrradiance", detail::g10(level / 0.01));
             attrs.emplace_back("Camera:IrradianceScaleToSIUnits", "0.01");
