@@ -170,7 +170,7 @@ constexpr const char* kUsage =
     "                      in time plus a term in the drone's heading (a sensor that tilts with\n"
     "                      the drone reads more facing the sun); the log gives the heading's effect\n"
     "                      and warns where it stands above the noise, and correct divides it out\n"
-    "                      of the readings (6 captures and headings 90 degrees apart at least)\n"
+    "                      of the readings (6 flight lines and headings 90 degrees apart at least)\n"
     "  --force             replace an existing --out once the new dataset is complete\n"
     "  --colmap BIN        COLMAP executable (default: colmap on PATH)\n"
     "  --exiv2 BIN         exiv2 executable (default: exiv2 on PATH)\n"
@@ -351,6 +351,7 @@ nlohmann::ordered_json check_light_sensor_heading(const std::string& band, const
   }
   const msgs::io::HeadingFit fit = msgs::io::fit_heading_bias(reading, time_s, heading);
   j["captures"] = fit.captures;
+  j["flight_lines"] = fit.lines;
   if (!fit.problem.empty()) {
     std::printf("  %s: the light sensor's readings not checked against the heading: %s\n", band.c_str(),
                 fit.problem.c_str());
@@ -362,9 +363,9 @@ nlohmann::ordered_json check_light_sensor_heading(const std::string& band, const
   if (divided)
     for (std::size_t k = 0; k < idx.size(); ++k) *items[idx[k]].meta.irradiance /= fit.heading_factor[k];
   std::printf("  %s: the light sensor reads %.1f%% (+- %.1f%%) higher flying %.0f degrees than flying %.0f degrees,"
-              " the change in time taken out (%zu captures, %.1f%% scatter)%s\n",
+              " the change in time taken out (%zu captures on %zu flight lines, %.1f%% scatter between lines)%s\n",
               band.c_str(), 100.0 * (fit.ratio - 1.0), 100.0 * fit.ratio * fit.ratio_log_se, fit.high_heading_deg,
-              fit.low_heading_deg, fit.captures, 100.0 * fit.scatter,
+              fit.low_heading_deg, fit.captures, fit.lines, 100.0 * fit.scatter,
               divided        ? ": divided out"
               : significant ? ""
                             : ": within the noise, kept");
@@ -377,6 +378,7 @@ nlohmann::ordered_json check_light_sensor_heading(const std::string& band, const
   j["high_heading_deg"] = fit.high_heading_deg;
   j["low_heading_deg"] = fit.low_heading_deg;
   j["scatter"] = fit.scatter;
+  j["degrees_of_freedom"] = fit.degrees_of_freedom;
   j["significant"] = significant;
   j["divided_out"] = divided;
   return j;

@@ -847,7 +847,7 @@ TEST_CASE("msgs import: a light sensor that reads higher on one heading is repor
     CAPTURE(camera);
     CHECK(r.first == 1);
     CHECK_MESSAGE(r.second.find("MS_NIR: the light sensor reads 12.8% (+- 0.0%) higher flying 20 degrees than flying"
-                                " 200 degrees, the change in time taken out (8 captures") != std::string::npos,
+                                " 200 degrees, the change in time taken out (8 captures on 8 flight lines") != std::string::npos,
                   r.second);
     CHECK_MESSAGE(r.second.find("warning: MS_NIR: images taken on one heading come out 12.8% darker than on the other;"
                                 " --light-sensor-heading correct divides") != std::string::npos,
@@ -887,7 +887,8 @@ TEST_CASE("msgs import: a light sensor that reads higher on one heading is repor
   const auto ok = import_ok(cdir, "ds", "--radiometry sun-sensor --light-sensor-heading correct");
   REQUIRE_MESSAGE(ok.first == 0, ok.second);
   CHECK_MESSAGE(ok.second.find("MS_NIR: the light sensor reads 12.8% (+- 0.0%) higher flying 20 degrees than flying"
-                               " 200 degrees, the change in time taken out (6 captures, 0.0% scatter): divided out") !=
+                               " 200 degrees, the change in time taken out (6 captures on 6 flight lines, 0.0% scatter between"
+                               " lines): divided out") !=
                     std::string::npos,
                 ok.second);
   CHECK(ok.second.find("warning: MS_NIR: images taken on one heading") == std::string::npos);
@@ -899,6 +900,8 @@ TEST_CASE("msgs import: a light sensor that reads higher on one heading is repor
     const Json& h = item.value();
     CAPTURE(band);
     CHECK(h["captures"] == 6);
+    CHECK(h["flight_lines"] == 6);
+    CHECK(h["degrees_of_freedom"] == 2);  // 6 lines on one axis: time's three parameters and the heading's one
     CHECK(h["ratio"].get<double>() == doctest::Approx(ratio).epsilon(1e-3).scale(0));
     CHECK(h["high_heading_deg"].get<double>() == doctest::Approx(20.0));
     CHECK(h["low_heading_deg"].get<double>() == doctest::Approx(200.0));

@@ -8,6 +8,8 @@
 
 #include <cmath>
 #include <cstdint>
+#include <limits>
+#include <utility>
 #include <numbers>
 #include <vector>
 
@@ -53,6 +55,7 @@ TEST_CASE("fit_heading_bias: flight lines that turn back, the sun climbing by 10
   const HeadingFit fit = fit_heading_bias(reading, f.time_s, f.heading_deg);
   REQUIRE(fit.problem.empty());
   CHECK(fit.captures == 12);
+  CHECK(fit.lines == 12);  // the heading turns back at every capture
   // log(1 + 0.1 t) is not quite quadratic in t: the residual is tiny, and so is the error.
   CHECK(fit.ratio == doctest::Approx(1.06 / 0.94).epsilon(2e-4).scale(0));
   CHECK(fit.high_heading_deg == 20.0);
@@ -85,6 +88,7 @@ TEST_CASE("fit_heading_bias: four headings, an effect of exactly the fitted form
   CHECK(fit.ratio == doctest::Approx(std::exp(0.05 * 2.0 * std::cos(30.0 * kDeg))).epsilon(1e-9).scale(0));
   CHECK(fit.high_heading_deg == 0.0);
   CHECK(fit.low_heading_deg == 180.0);
+  CHECK_FALSE(fit.one_axis);  // the lines cross: both of the heading's columns
   CHECK(fit.scatter < 1e-9);
   CHECK(fit.significant());
 }
@@ -129,13 +133,74 @@ TEST_CASE("fit_heading_bias: passing clouds are not called a heading effect; a r
   CHECK(found == 20);
 }
 
+TEST_CASE("fit_heading_bias: a cloud over a whole flight line is not a heading effect") {
+  // A lawn-mower flight: 8 lines of 10 captures, flown at 20 and 200 degrees in turn, crabbing
+  // a few degrees into the wind; the light changes slowly, by +-4% over about three lines, as a
+  // cloud bank passes, and each reading has 0.5% of noise. The captures of a line share its light:
+  // taken one by one they would count each line's cloud ten times over.
+  const auto lawn_mower = [](double bias, std::uint64_t seed) {
+    Flight f;
+    std::vector<double> reading;
+    std::uint64_t state = seed;
+    for (int line = 0; line < 8; ++line)
+      for (int k = 0; k < 10; ++k) {
+        const double t = 36000.0 + 2.0 * (10 * line + k) + 8.0 * line;  // 8 s to turn
+        const double heading = (line % 2 ? 200.0 : 20.0) + 3.0 * noise(state);
+        const double light = 1000.0 * (1.0 + 0.04 * std::sin(2.0 * std::numbers::pi * (t - 36000.0) / 65.0));
+        f.time_s.push_back(t);
+        f.heading_deg.push_back(heading < 0 ? heading + 360.0 : heading);
+        reading.push_back(light * (1.0 + 0.005 * noise(state)) * (1.0 + bias * std::cos((heading - 20.0) * kDeg)));
+      }
+    return std::pair{f, reading};
+  };
+  int false_alarms = 0, found = 0;
+  for (std::uint64_t seed = 1; seed <= 10; ++seed) {
+    CAPTURE(seed);
+    const auto [f, calm] = lawn_mower(0.0, seed);
+    const HeadingFit a = fit_heading_bias(calm, f.time_s, f.heading_deg);
+    REQUIRE(a.problem.empty());
+    CHECK(a.lines == 8);
+    CHECK(a.one_axis);
+    CHECK(a.degrees_of_freedom == 4);  // 8 lines, 4 parameters: the term along the lines' axis
+    false_alarms += a.significant();
+    // An effect of 1 +- 0.15 (35% between the lines) stands out of the clouds even so.
+    const auto [g, biased] = lawn_mower(0.15, seed);
+    const HeadingFit b = fit_heading_bias(biased, g.time_s, g.heading_deg);
+    REQUIRE(b.problem.empty());
+    CHECK(b.ratio == doctest::Approx(1.15 / 0.85).epsilon(0.05).scale(0));
+    found += b.significant();
+  }
+  CHECK(false_alarms == 0);
+  CHECK(found >= 8);
+}
+
+TEST_CASE("HeadingFit::student_t_3sigma: the t quantiles of three standard errors") {
+  CHECK(HeadingFit::student_t_3sigma(0) == std::numeric_limits<double>::infinity());
+  CHECK(HeadingFit::student_t_3sigma(2) == doctest::Approx(19.207));
+  CHECK(HeadingFit::student_t_3sigma(30) == doctest::Approx(3.270));
+  // The expansion beyond the table meets it, and tends to the normal's 3.
+  CHECK(HeadingFit::student_t_3sigma(31) == doctest::Approx(3.260).epsilon(0.002));
+  CHECK(HeadingFit::student_t_3sigma(100000) == doctest::Approx(3.0).epsilon(1e-4));
+  for (int v = 1; v < 60; ++v) CHECK(HeadingFit::student_t_3sigma(v + 1) < HeadingFit::student_t_3sigma(v));
+}
+
 TEST_CASE("fit_heading_bias: what the check cannot use gives a reason") {
   const Flight f = flight(8, {20.0, 200.0});
   const std::vector<double> reading(8, 700.0);
-  SUBCASE("too few captures") {
+  SUBCASE("too few flight lines") {
     const HeadingFit fit = fit_heading_bias({1, 2, 3, 4, 5}, {0, 2, 4, 6, 8}, {20, 200, 20, 200, 20});
-    CHECK(fit.problem.find("5 captures") != std::string::npos);
+    CHECK(fit.problem.find("5 flight lines") != std::string::npos);
     CHECK_FALSE(fit.significant());
+    // 40 captures on 5 lines are no more.
+    std::vector<double> r, t, h;
+    for (int i = 0; i < 40; ++i) {
+      r.push_back(100.0 + i % 3);
+      t.push_back(2.0 * i);
+      h.push_back(i / 8 % 2 ? 200.0 : 20.0);
+    }
+    const HeadingFit lines = fit_heading_bias(r, t, h);
+    CHECK(lines.problem.find("5 flight lines, runs of captures on one heading (the check takes 6)") != std::string::npos);
+    CHECK(lines.captures == 40);
   }
   SUBCASE("one heading") {
     const HeadingFit fit = fit_heading_bias(reading, f.time_s, std::vector<double>(8, 20.0));
