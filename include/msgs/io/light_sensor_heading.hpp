@@ -13,8 +13,9 @@
 //
 //   log E = a + b tau + c tau^2 + p cos(psi) + q sin(psi),   tau the time scaled to [-1, 1]
 //
-// by least squares (the minimum-norm solution: with flight lines on two opposite headings only
-// the part along them is determined, which is all those captures need). The heading term's
+// by least squares (lines flown there and back along one axis determine only the part along it,
+// which is all their captures need: there the term is p times the heading vector's component
+// along the axis, and the solution the minimum-norm one). The heading term's
 // spread over the headings flown is what the sensor adds; `heading_factor` divides it out of each
 // reading, relative to the mean over the captures, so the level of the readings stays where it was.
 //
