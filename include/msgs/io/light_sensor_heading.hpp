@@ -38,6 +38,8 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/SVD>
+
 #include "msgs/io/error.hpp"
 
 namespace msgs::io {
@@ -99,72 +101,23 @@ struct HeadingFit {
 
 namespace detail {
 
-using Row5 = std::array<double, 5>;
-using Mat5 = std::array<Row5, 5>;
-
-inline double dot(const Row5& a, const Row5& b) {
-  double s = 0.0;
-  for (int k = 0; k < 5; ++k) s += a[k] * b[k];
-  return s;
-}
-
-inline Row5 times(const Mat5& m, const Row5& v) {
-  Row5 r{};
-  for (int k = 0; k < 5; ++k) r[k] = dot(m[k], v);
-  return r;
-}
+using Vec5 = Eigen::Matrix<double, 5, 1>;
+using Mat5 = Eigen::Matrix<double, 5, 5>;
 
 /// The Moore-Penrose pseudo-inverse of a symmetric positive semi-definite 5 x 5 matrix, from its
-/// eigen-decomposition by cyclic Jacobi rotations; eigenvalues below 1e-10 of the largest count as
-/// zero. `rank` receives the number kept.
-inline Mat5 symmetric_pseudo_inverse(Mat5 a, int& rank) {
-  Mat5 v{};
-  for (int k = 0; k < 5; ++k) v[k][k] = 1.0;
-  for (int sweep = 0; sweep < 50; ++sweep) {
-    double off = 0.0, diag = 0.0;
-    for (int p = 0; p < 5; ++p) {
-      diag += a[p][p] * a[p][p];
-      for (int q = p + 1; q < 5; ++q) off += a[p][q] * a[p][q];
-    }
-    if (!(off > 1e-30 * diag)) break;
-    for (int p = 0; p < 5; ++p)
-      for (int q = p + 1; q < 5; ++q) {
-        if (a[p][q] == 0.0) continue;
-        // The rotation that zeroes a[p][q] (Golub and Van Loan, algorithm 8.4.1).
-        const double theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
-        const double t = (theta >= 0 ? 1.0 : -1.0) / (std::abs(theta) + std::sqrt(theta * theta + 1.0));
-        const double c = 1.0 / std::sqrt(t * t + 1.0), s = t * c;
-        for (int k = 0; k < 5; ++k) {  // a <- a J
-          const double akp = a[k][p], akq = a[k][q];
-          a[k][p] = c * akp - s * akq;
-          a[k][q] = s * akp + c * akq;
-        }
-        for (int k = 0; k < 5; ++k) {  // a <- J' a
-          const double apk = a[p][k], aqk = a[q][k];
-          a[p][k] = c * apk - s * aqk;
-          a[q][k] = s * apk + c * aqk;
-        }
-        for (int k = 0; k < 5; ++k) {  // v <- v J
-          const double vkp = v[k][p], vkq = v[k][q];
-          v[k][p] = c * vkp - s * vkq;
-          v[k][q] = s * vkp + c * vkq;
-        }
-      }
-  }
-  double largest = 0.0;
-  for (int k = 0; k < 5; ++k) largest = std::max(largest, std::abs(a[k][k]));
-  Row5 inv{};
+/// singular value decomposition (for such a matrix, its eigen-decomposition); singular values
+/// below 1e-10 of the largest count as zero. `rank` receives the number kept.
+inline Mat5 symmetric_pseudo_inverse(const Mat5& a, int& rank) {
+  const Eigen::JacobiSVD<Mat5> svd(a, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  const Vec5& sigma = svd.singularValues();  // in decreasing order
+  Vec5 inv = Vec5::Zero();
   rank = 0;
   for (int k = 0; k < 5; ++k)
-    if (a[k][k] > 1e-10 * largest) {
-      inv[k] = 1.0 / a[k][k];
+    if (sigma[k] > 1e-10 * sigma[0]) {
+      inv[k] = 1.0 / sigma[k];
       ++rank;
     }
-  Mat5 r{};
-  for (int i = 0; i < 5; ++i)
-    for (int j = 0; j < 5; ++j)
-      for (int k = 0; k < 5; ++k) r[i][j] += v[i][k] * inv[k] * v[j][k];
-  return r;
+  return svd.matrixV() * inv.asDiagonal() * svd.matrixU().transpose();
 }
 
 /// The smallest angle between two headings, degrees in [0, 180].
@@ -219,7 +172,7 @@ inline HeadingFit fit_heading_bias(const std::vector<double>& reading, const std
   const double mid = 0.5 * (*t_lo + *t_hi), half = 0.5 * (*t_hi - *t_lo);
   constexpr double deg = std::numbers::pi / 180.0;
   using detail::Mat5;
-  using detail::Row5;
+  using detail::Vec5;
   // Each line's mean time, the direction of its mean heading vector and its mean log reading.
   std::vector<double> line_t(m), line_c(m), line_s(m), y(m);
   for (std::size_t l = 0; l < m; ++l) {
@@ -262,27 +215,25 @@ inline HeadingFit fit_heading_bias(const std::vector<double>& reading, const std
   const auto row = [&](double t, double c, double sn) {
     const double tau = half > 0 ? (t - mid) / half : 0.0;
     const auto hc = heading_columns(c, sn);
-    return Row5{1.0, tau, tau * tau, hc[0], hc[1]};
+    return Vec5(1.0, tau, tau * tau, hc[0], hc[1]);
   };
   // Least squares through the normal equations, (X'X)^+ X'y: the minimum-norm solution, with
   // the pseudo-inverse from the eigen-decomposition of the 5 x 5 X'X (columns of order 1; an
   // unused heading column is zero and drops out).
-  std::vector<Row5> rows(m);
-  Mat5 xtx{};
-  Row5 xty{};
+  std::vector<Vec5> rows(m);
+  Mat5 xtx = Mat5::Zero();
+  Vec5 xty = Vec5::Zero();
   for (std::size_t l = 0; l < m; ++l) {
     rows[l] = row(line_t[l], line_c[l], line_s[l]);
-    for (int r = 0; r < 5; ++r) {
-      xty[r] += rows[l][r] * y[l];
-      for (int q = 0; q < 5; ++q) xtx[r][q] += rows[l][r] * rows[l][q];
-    }
+    xty += rows[l] * y[l];
+    xtx += rows[l] * rows[l].transpose();
   }
   int rank = 0;
   const Mat5 xtx_pinv = detail::symmetric_pseudo_inverse(xtx, rank);
-  const Row5 beta = detail::times(xtx_pinv, xty);
+  const Vec5 beta = xtx_pinv * xty;
   double rss = 0.0;
   for (std::size_t l = 0; l < m; ++l) {
-    const double r = y[l] - detail::dot(rows[l], beta);
+    const double r = y[l] - rows[l].dot(beta);
     rss += r * r;
   }
   fit.degrees_of_freedom = int(m) - rank;  // at least 1: m >= 6 lines, rank <= 5
@@ -304,10 +255,10 @@ inline HeadingFit fit_heading_bias(const std::vector<double>& reading, const std
   fit.high_heading_deg = heading_deg[hi];
   fit.low_heading_deg = heading_deg[lo];
   // Var(h_hi - h_lo) = v' sigma^2 (X'X)^+ v, v the difference of the two headings' columns.
-  Row5 v{};
+  Vec5 v = Vec5::Zero();
   v[3] = hc[hi][0] - hc[lo][0];
   v[4] = hc[hi][1] - hc[lo][1];
-  fit.ratio_log_se = std::sqrt(std::max(0.0, sigma2 * detail::dot(v, detail::times(xtx_pinv, v))));
+  fit.ratio_log_se = std::sqrt(std::max(0.0, sigma2 * v.dot(xtx_pinv * v)));
   fit.heading_factor.resize(n);
   for (std::size_t i = 0; i < n; ++i) fit.heading_factor[i] = std::exp(h[i] - mean);
   // Readings that span hundreds of orders of magnitude overflow exp: no light sensor reads so.
