@@ -13,6 +13,7 @@
 #include <numbers>
 #include <vector>
 
+#include <msgs/io/capture_meta.hpp>
 #include <msgs/io/light_sensor_heading.hpp>
 
 using namespace msgs::io;
@@ -240,4 +241,24 @@ TEST_CASE("fit_heading_bias: what the check cannot use gives a reason") {
     REQUIRE(fit.problem.empty());
     CHECK(fit.ratio == doctest::Approx(740.0 / 660.0).epsilon(1e-9).scale(0));
   }
+}
+
+TEST_CASE("parse_capture_meta: the drone's heading, in [0, 360) degrees clockwise from north") {
+  // DJI writes the aircraft's yaw in degrees, -180 to 180; MicaSense's light sensor in radians.
+  const auto heading = [](const std::string& exiv2) { return parse_capture_meta(exiv2, "x.tif").heading_deg; };
+  REQUIRE(heading("Xmp.drone-dji.FlightYawDegree -160.3\n").has_value());
+  CHECK(*heading("Xmp.drone-dji.FlightYawDegree -160.3\n") == doctest::Approx(199.7).epsilon(1e-12));
+  CHECK(*heading("Xmp.drone-dji.FlightYawDegree 180\n") == doctest::Approx(180.0));
+  CHECK(*heading("Xmp.drone-dji.FlightYawDegree -0\n") == 0.0);
+  CHECK(*heading("Xmp.drone-dji.FlightYawDegree 720.5\n") == doctest::Approx(0.5).epsilon(1e-12));
+  CHECK(*heading("Xmp.drone-dji.FlightYawDegree -1e-17\n") == 0.0);  // not 360
+  CHECK(*heading("Xmp.DLS.Yaw -2.7427257414198345\n") ==
+        doctest::Approx(360.0 - 2.7427257414198345 * 180.0 / std::numbers::pi).epsilon(1e-12));
+  // DJI's key first where a file has both.
+  const CaptureMeta both = parse_capture_meta("Xmp.DLS.Yaw 1.0\nXmp.drone-dji.FlightYawDegree 10\n", "x.tif");
+  CHECK(*both.heading_deg == doctest::Approx(10.0));
+  CHECK(both.source.at("heading") == "Xmp.drone-dji.FlightYawDegree");
+  // No heading tag, or one so large that it overflows: no heading.
+  CHECK_FALSE(heading("Xmp.Camera.BandName NIR\n").has_value());
+  CHECK_FALSE(heading("Xmp.DLS.Yaw 1e308\n").has_value());
 }

@@ -739,9 +739,13 @@ inline CaptureMeta capture_meta_from_exiv2(const std::map<std::string, std::stri
   if (auto e = first({"Xmp.drone-dji.FlightYawDegree", "Xmp.DLS.Yaw"})) {
     const bool radians = e->first == "Xmp.DLS.Yaw";
     const double v = number(*e, radians ? "a heading in radians" : "a heading in degrees", false);
-    const double d = std::fmod(radians ? v * 180.0 / std::numbers::pi : v, 360.0);
-    m.heading_deg = d < 0 && d + 360.0 < 360.0 ? d + 360.0 : d < 0 ? 0.0 : d;
-    m.source["heading"] = e->first;
+    const double degrees = radians ? v * 180.0 / std::numbers::pi : v;
+    if (std::isfinite(degrees)) {  // (else so large that it overflowed: no heading)
+      double d = std::fmod(degrees, 360.0);  // (-360, 360)
+      if (d < 0) d += 360.0;
+      m.heading_deg = d < 360.0 ? d : 0.0;  // -1e-17 + 360 rounds to 360
+      m.source["heading"] = e->first;
+    }
   }
   read_gps(kv, m);
   read_time(kv, m);
