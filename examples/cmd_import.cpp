@@ -190,6 +190,9 @@ struct Item {
   msgs::io::FrameRadiometry rad;
   bool radiometry_applied = false;
   int width = 0, height = 0;
+  /// What the light sensor's reading was divided by for the drone's heading (--light-sensor-heading
+  /// correct); the file's own reading is meta.irradiance times this
+  std::optional<double> heading_factor;
 };
 
 /// The images of `scan`'s captures in msgs' band order, with their names in the layout and in
@@ -361,7 +364,10 @@ nlohmann::ordered_json check_light_sensor_heading(const std::string& band, const
   const bool significant = fit.significant();
   const bool divided = correct && significant;
   if (divided)
-    for (std::size_t k = 0; k < idx.size(); ++k) *items[idx[k]].meta.irradiance /= fit.heading_factor[k];
+    for (std::size_t k = 0; k < idx.size(); ++k) {
+      *items[idx[k]].meta.irradiance /= fit.heading_factor[k];
+      items[idx[k]].heading_factor = fit.heading_factor[k];
+    }
   std::printf("  %s: the light sensor reads %.1f%% (+- %.1f%%) higher flying %.0f degrees than flying %.0f degrees,"
               " the change in time taken out (%zu captures on %zu flight lines, %.1f%% scatter between lines)%s\n",
               band.c_str(), 100.0 * (fit.ratio - 1.0), 100.0 * fit.ratio * fit.ratio_log_se, fit.high_heading_deg,
@@ -1595,6 +1601,7 @@ int run_import(const std::vector<std::string>& argv) {
         rad["irradiance_w_m2_nm"] = msgs::io::reflectance_irradiance(it.rad);
       }
       if (s.irradiance) rad[it.meta.irradiance_si ? "light_sensor_w_m2_nm" : "light_sensor"] = it.rad.irradiance;
+      if (s.irradiance && it.heading_factor) rad["light_sensor_heading_factor"] = *it.heading_factor;
       if (s.irradiance && it.meta.sun_elevation_deg) rad["sun_elevation_deg"] = *it.meta.sun_elevation_deg;
       if (s.irradiance && it.meta.sun_sensor_angle_deg) rad["sun_sensor_angle_deg"] = *it.meta.sun_sensor_angle_deg;
       if (band_ratios) rad[it.rad.radiance_a1 > 0 ? "radiance_a1" : "gain_adjustment"] =

@@ -911,15 +911,28 @@ TEST_CASE("msgs import: a light sensor that reads higher on one heading is repor
   const msgs::synth::SynthScene scene = msgs::synth::make_scene(raw_set_preset(opt), opt.seed);
   const double common = tf["msgs_import"]["sun_sensor_common_scale"]["scale"].get<double>();
   const double level = std::sqrt((1 + bias) * (1 - bias));
-  int checked = 0;
+  int checked = 0, facing = 0, away = 0;
   for (const auto& f : tf["frames"]) {
     if (f["mm_channel"] == "D") continue;
     ++checked;
     CHECK_MESSAGE(median_ratio_to_truth(cdir, cdir / "ds", f, scene, opt) ==
                       doctest::Approx(msgs::synth::kDjiReflectanceFactor / level * common).epsilon(0.01).scale(0),
                   f["source"].get<std::string>());
+    // What each reading was divided by, next to it: (1 +- 0.06) over the mean level, on the lines
+    // flown at 20 and at 200 degrees.
+    REQUIRE_MESSAGE(f["radiometry"].contains("light_sensor_heading_factor"), f["source"].get<std::string>());
+    const double factor = f["radiometry"]["light_sensor_heading_factor"].get<double>();
+    if (factor > 1.0) {
+      ++facing;
+      CHECK(factor == doctest::Approx((1 + bias) / level).epsilon(1e-3).scale(0));
+    } else {
+      ++away;
+      CHECK(factor == doctest::Approx((1 - bias) / level).epsilon(1e-3).scale(0));
+    }
   }
   CHECK(checked == 24);
+  CHECK(facing == 12);
+  CHECK(away == 12);
 }
 
 TEST_CASE("msgs import --matching window and gps: the pairs of nearby captures register the whole set") {
