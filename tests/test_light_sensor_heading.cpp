@@ -6,11 +6,13 @@
 // the check cannot use give a reason, not a number.
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <limits>
 #include <utility>
 #include <numbers>
+#include <random>
 #include <vector>
 
 #include <msgs/io/capture_meta.hpp>
@@ -183,6 +185,27 @@ TEST_CASE("HeadingFit::student_t_3sigma: the t quantiles of three standard error
   CHECK(HeadingFit::student_t_3sigma(31) == doctest::Approx(3.260).epsilon(0.002));
   CHECK(HeadingFit::student_t_3sigma(100000) == doctest::Approx(3.0).epsilon(1e-4));
   for (int v = 1; v < 60; ++v) CHECK(HeadingFit::student_t_3sigma(v + 1) < HeadingFit::student_t_3sigma(v));
+}
+
+TEST_CASE("heading_spread_deg: the widest angle between two headings, as over all pairs") {
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> any(-1000.0, 1000.0), near(-30.0, 30.0);
+  for (int trial = 0; trial < 300; ++trial) {
+    const std::size_t n = 1 + std::size_t(trial % 40);
+    std::vector<double> h(n);
+    // Headings anywhere (beyond [0, 360) too), or bunched around two or three directions.
+    const double centre = any(rng);
+    for (std::size_t i = 0; i < n; ++i) h[i] = trial % 3 == 0 ? any(rng) : centre + 120.0 * double(i % (2 + trial % 2)) + near(rng);
+    double all_pairs = 0.0;
+    for (std::size_t i = 0; i < n; ++i)
+      for (std::size_t j = i + 1; j < n; ++j) all_pairs = std::max(all_pairs, detail::heading_gap_deg(h[i], h[j]));
+    CAPTURE(trial);
+    CHECK(detail::heading_spread_deg(h) == doctest::Approx(all_pairs).epsilon(1e-9));
+  }
+  CHECK(detail::heading_spread_deg({}) == 0.0);
+  CHECK(detail::heading_spread_deg({359.5, -0.5, 0.25}) == doctest::Approx(0.75));
+  CHECK(detail::heading_spread_deg({-1e-17, 180.0}) == doctest::Approx(180.0));
+  CHECK(detail::heading_spread_deg({10.0, 190.0, 100.0}) == doctest::Approx(180.0));
 }
 
 TEST_CASE("fit_heading_bias: what the check cannot use gives a reason") {

@@ -126,6 +126,24 @@ inline double heading_gap_deg(double a, double b) {
   return d > 180.0 ? 360.0 - d : d;
 }
 
+/// The largest angle between two of the headings `heading_deg`, degrees in [0, 180], in n log n
+/// instead of over all n^2 pairs. The pair farthest apart, a and b, has b the first heading at or
+/// after a's opposite going clockwise around the circle, or a the first after b's (any heading
+/// between would lie farther from the other), so each heading needs only that one neighbour.
+inline double heading_spread_deg(std::vector<double> heading_deg) {
+  for (double& h : heading_deg) {
+    h = std::fmod(h, 360.0);
+    if (h < 0.0) h += 360.0;  // [0, 360]: -1e-17 + 360 rounds to 360, which heading_gap_deg takes
+  }
+  std::sort(heading_deg.begin(), heading_deg.end());
+  double spread = 0.0;
+  for (const double h : heading_deg) {
+    const auto after = std::lower_bound(heading_deg.begin(), heading_deg.end(), h < 180.0 ? h + 180.0 : h - 180.0);
+    spread = std::max(spread, heading_gap_deg(h, after == heading_deg.end() ? heading_deg.front() : *after));
+  }
+  return spread;
+}
+
 }  // namespace detail
 
 /// Fit the heading term to one band's light-sensor readings (positive), capture times (seconds)
@@ -144,9 +162,7 @@ inline HeadingFit fit_heading_bias(const std::vector<double>& reading, const std
       fit.problem = "a reading, time or heading that is not a finite positive number";
       return fit;
     }
-  double spread = 0.0;
-  for (std::size_t i = 0; i < n; ++i)
-    for (std::size_t j = i + 1; j < n; ++j) spread = std::max(spread, detail::heading_gap_deg(heading_deg[i], heading_deg[j]));
+  const double spread = detail::heading_spread_deg(heading_deg);
   // The flight lines: runs of captures, in time, within kSameLineDeg of the run's first heading.
   std::vector<std::size_t> order(n);
   for (std::size_t i = 0; i < n; ++i) order[i] = i;
@@ -165,7 +181,8 @@ inline HeadingFit fit_heading_bias(const std::vector<double>& reading, const std
     return fit;
   }
   if (m < kMinHeadingLines) {
-    fit.problem = cat(m, m == 1 ? " flight line," : " flight lines, runs of captures on one heading (the check takes ", kMinHeadingLines, ")");
+    fit.problem = cat(m, m == 1 ? " flight line" : " flight lines", ", runs of captures on one heading (the check takes ",
+                      kMinHeadingLines, ")");
     return fit;
   }
   const auto [t_lo, t_hi] = std::minmax_element(time_s.begin(), time_s.end());
