@@ -258,7 +258,8 @@ std::string radiometry_formula(const msgs::io::FrameRadiometry& r, bool applied,
       cat(s.exposure ? " * exposure_s" : "", s.gain ? " * gain" : "", s.vignetting ? " * vignetting(r)" : "",
           s.row_gradient ? " * (1 + a2 y / exposure_s - a3 y)" : "", s.irradiance ? " * light_sensor" : "");
   const std::string v = cat("(DN", s.black_level ? " - black_level" : "", ")",
-                            response.empty() ? "" : " / (" + response.substr(3) + ")", " * scale");
+                            response.empty() ? "" : " / (" + response.substr(3) + ")", " * scale",
+                            r.offset != 0.0 ? " - offset" : "");
   switch (calibration) {
     case msgs::io::Calibration::relative: return "value = " + v;
     case msgs::io::Calibration::sun_sensor: return "reflectance = " + v + ", scale = pi * a1 / (dn_max + 1)";
@@ -269,7 +270,10 @@ std::string radiometry_formula(const msgs::io::FrameRadiometry& r, bool applied,
     default:
       return "reflectance = " + v + ", scale = 1 / the mean over the band's calibration-panel pictures of the same" +
              " without scale, averaged over the panel's area and divided by its albedo (interpolated linearly in" +
-             " time between sessions of panel pictures taken more than 2 minutes apart)";
+             " time between sessions of panel pictures taken more than 2 minutes apart)" +
+             (r.offset != 0.0 ? ", offset = that of the line through the panels of several reflectances (albedo +"
+                                " offset in place of the albedo)"
+                              : "");
   }
 }
 
@@ -421,23 +425,29 @@ std::vector<std::size_t> usable_panels(const std::vector<Item>& panels, const st
 
 /// The irradiance of `band` through the flight from its panel pictures `use`
 /// (msgs/io/calibration_panel.hpp), in the sensor's units: an image's scale is 1 / its value at
-/// the image's time. Each picture is logged and appended to `report`.
+/// the image's time, less the empirical line's offset where panels of several reflectances give
+/// one. Each picture is logged and appended to `report`, the line to `line_report`.
 msgs::io::PanelSchedule calibrate_with_panels(std::vector<Item>& panels, const std::vector<std::size_t>& use,
                                               const std::string& band, const msgs::io::RadiometrySteps& steps,
                                               const std::map<std::string, double>& albedo_arg, const fs::path& images,
-                                              nlohmann::ordered_json& report) {
-  std::vector<msgs::io::PanelIrradiance> readings;
+                                              nlohmann::ordered_json& report, nlohmann::ordered_json& line_report) {
+  struct Picture {
+    double albedo = 0.0;
+    std::string albedo_from;
+    msgs::io::PanelReading reading;
+  };
+  std::vector<Picture> pictures;
+  std::vector<msgs::io::PanelResponse> responses;
   for (std::size_t k : use) {
     Item& p = panels[k];
     const fs::path src = images / p.source;
-    double albedo = 0.0;
-    std::string albedo_from;
+    Picture pic;
     if (const auto a = albedo_arg.count(band) ? albedo_arg.find(band) : albedo_arg.find(""); a != albedo_arg.end()) {
-      albedo = a->second;
-      albedo_from = "--panel-albedo";
+      pic.albedo = a->second;
+      pic.albedo_from = "--panel-albedo";
     } else if (p.meta.panel_albedo) {
-      albedo = *p.meta.panel_albedo;
-      albedo_from = p.meta.source.at("panel_albedo");
+      pic.albedo = *p.meta.panel_albedo;
+      pic.albedo_from = p.meta.source.at("panel_albedo");
     } else {
       fail(src, "Xmp.Camera.Albedo",
            "missing: the panel's reflectance in this band is not known (give it from the panel's calibration sheet"
@@ -445,13 +455,38 @@ msgs::io::PanelSchedule calibrate_with_panels(std::vector<Item>& panels, const s
     }
     const BandImage img = read_band_image(src, band);
     p.rad = msgs::io::frame_radiometry(p.meta, steps, img.dn_max, img.raw.width, img.raw.height);
-    const msgs::io::PanelReading reading = msgs::io::read_panel(img.raw, p.rad, *p.meta.panel_area, src);
-    const double e = reading.mean / albedo;
+    pic.reading = msgs::io::read_panel(img.raw, p.rad, *p.meta.panel_area, src);
+    responses.push_back({pic.reading.mean, pic.albedo, p.meta.time_s});
+    pictures.push_back(pic);
+  }
+  // Panels of several reflectances: the empirical line's offset (0 where they do not give one).
+  const msgs::io::PanelLine line = msgs::io::panel_line(responses);
+  const auto [lowest, highest] = std::minmax_element(
+      responses.begin(), responses.end(), [](const auto& a, const auto& b) { return a.albedo < b.albedo; });
+  const bool spans = highest->albedo >= msgs::io::kPanelLineAlbedoRatio * lowest->albedo;
+  if (line.problem.empty()) {
+    std::printf("  %s: panels of reflectance %.3g to %.3g in %zu session%s lie on a line with an offset of %.4g:"
+                " each image's reflectance is response / E %s %.4g\n",
+                band.c_str(), line.low_albedo, line.high_albedo, line.sessions, line.sessions == 1 ? "" : "s",
+                line.offset, line.offset < 0 ? "+" : "-", std::abs(line.offset));
+    line_report["offset"] = line.offset;
+    line_report["sessions"] = line.sessions;
+    line_report["albedo_range"] = {line.low_albedo, line.high_albedo};
+  } else if (spans) {  // panels of several reflectances that give no line: say why
+    std::printf("  warning: %s: no empirical line from the panels: %s; the line through zero is used\n", band.c_str(),
+                line.problem.c_str());
+    line_report["problem"] = line.problem;
+  }
+  std::vector<msgs::io::PanelIrradiance> readings;
+  for (std::size_t u = 0; u < use.size(); ++u) {
+    Item& p = panels[use[u]];
+    const Picture& pic = pictures[u];
+    const double e = pic.reading.mean / (pic.albedo + line.offset);
     p.rad.scale = 1.0 / e;
     readings.push_back({e, p.meta.time_s});
     const double watts = msgs::io::reflectance_irradiance(p.rad);  // 0 without MicaSense's a1
     std::printf("  %s: panel %s, albedo %.4g (%s), %zu px: %s%s\n", band.c_str(), p.source.generic_string().c_str(),
-                albedo, albedo_from.c_str(), reading.pixels,
+                pic.albedo, pic.albedo_from.c_str(), pic.reading.pixels,
                 watts > 0 ? cat("irradiance ", msgs::io::short_number(watts, 4), " W/m^2/nm").c_str()
                           : cat("irradiance ", msgs::io::short_number(e, 4), " in the sensor's units").c_str(),
                 steps.irradiance ? cat(", the light sensor read ", msgs::io::short_number(p.rad.irradiance, 4),
@@ -461,19 +496,20 @@ msgs::io::PanelSchedule calibrate_with_panels(std::vector<Item>& panels, const s
     nlohmann::ordered_json j;
     j["band"] = band;
     j["source"] = p.source.generic_string();
-    j["albedo"] = albedo;
-    j["albedo_from"] = albedo_from;
+    j["albedo"] = pic.albedo;
+    j["albedo_from"] = pic.albedo_from;
     j["area"] = *p.meta.panel_area;
-    j["pixels"] = reading.pixels;
-    j["saturated_pixels"] = reading.saturated;
-    j["mean_response"] = reading.mean;
+    j["pixels"] = pic.reading.pixels;
+    j["saturated_pixels"] = pic.reading.saturated;
+    j["mean_response"] = pic.reading.mean;
     if (p.meta.time_s) j["time_s"] = *p.meta.time_s;
     if (watts > 0) j["irradiance_w_m2_nm"] = watts;
     if (steps.irradiance) j[p.meta.irradiance_si ? "light_sensor_w_m2_nm" : "light_sensor"] = p.rad.irradiance;
     if (!p.meta.panel_serial.empty()) j["panel_serial"] = p.meta.panel_serial;
     report.push_back(j);
   }
-  const msgs::io::PanelSchedule schedule = msgs::io::panel_schedule(readings);
+  msgs::io::PanelSchedule schedule = msgs::io::panel_schedule(readings);
+  schedule.offset = line.offset;
   // Pictures that should agree (one session, or all of them when there are no sessions in time).
   std::vector<double> lo(schedule.nodes.size(), 1e300), hi(schedule.nodes.size(), 0.0);
   for (const auto& r : readings) {
@@ -1166,6 +1202,7 @@ int run_import(const std::vector<std::string>& argv) {
   std::map<std::string, std::vector<std::size_t>> by_band;
   for (std::size_t i = 0; i < items.size(); ++i) by_band[items[i].band].push_back(i);
   nlohmann::ordered_json panel_report = nlohmann::ordered_json::array();  // what each panel picture gave
+  nlohmann::ordered_json panel_lines = nlohmann::ordered_json::object();  // band -> the empirical line
   nlohmann::ordered_json heading_report = nlohmann::ordered_json::object();  // band -> the heading check
   double all_bands_max = 0.0;  // sun-sensor: the brightest value of any band, and its band
   std::string brightest_band;
@@ -1242,9 +1279,11 @@ int run_import(const std::vector<std::string>& argv) {
       }
       continue;
     }
+    nlohmann::ordered_json line_report = nlohmann::ordered_json::object();
     const msgs::io::PanelSchedule schedule =
-        by_panel ? calibrate_with_panels(panels, band_panels, band, steps, panel_albedo, images, panel_report)
+        by_panel ? calibrate_with_panels(panels, band_panels, band, steps, panel_albedo, images, panel_report, line_report)
                  : msgs::io::PanelSchedule{};
+    if (!line_report.empty()) panel_lines[band] = line_report;
     if (schedule.timed()) {
       std::vector<std::string> untimed;
       for (std::size_t i : idx)
@@ -1253,11 +1292,13 @@ int run_import(const std::vector<std::string>& argv) {
         std::printf("  warning: %s: %zu images have no capture time (%s): the panel's mean irradiance is used for them\n",
                     band.c_str(), untimed.size(), list_some(untimed, 3).c_str());
     }
-    for (std::size_t i : idx)
+    for (std::size_t i : idx) {
+      if (by_panel) items[i].rad.offset = schedule.offset;
       items[i].rad.scale = by_panel                    ? 1.0 / schedule.at(items[i].meta.time_s)
                            : reflectance                 ? msgs::io::reflectance_scale(items[i].rad)
                            : items[i].radiometry_applied ? msgs::io::band_scale(mx)
                                                          : 1.0 / items[i].rad.dn_max;
+    }
   }
   double common = 1.0;
   if (band_ratios) {
@@ -1524,6 +1565,7 @@ int run_import(const std::vector<std::string>& argv) {
   meta_json["images"] = items.size();
   if (!panel_keys.empty()) meta_json["calibration_captures_set_aside"] = panel_keys;
   if (!panel_report.empty()) meta_json["calibration_panels"] = panel_report;
+  if (!panel_lines.empty()) meta_json["calibration_panel_lines"] = panel_lines;
   if (reflectance) meta_json["reflectance_percentiles"] = reflectance_percentiles;
   if (band_ratios) meta_json["sun_sensor_common_scale"] = {{"scale", common}, {"brightest_band", brightest_band}};
   if (!heading_report.empty()) meta_json["light_sensor_heading"] = heading_report;
@@ -1607,6 +1649,7 @@ int run_import(const std::vector<std::string>& argv) {
       if (band_ratios) rad[it.rad.radiance_a1 > 0 ? "radiance_a1" : "gain_adjustment"] =
           it.rad.radiance_a1 > 0 ? it.rad.radiance_a1 : it.rad.gain_adjustment;
       rad["scale"] = it.rad.scale;
+      if (it.rad.offset != 0.0) rad["offset"] = it.rad.offset;
       rad["dn_max"] = it.rad.dn_max;
       rad["formula"] = radiometry_formula(it.rad, it.radiometry_applied, calibration);
       if (it.meta.band_name) rad["band_name"] = *it.meta.band_name;

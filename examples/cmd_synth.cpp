@@ -17,7 +17,8 @@ constexpr const char* kUsage =
     "usage: msgs synth --preset tiny|small|medium --out DIR [--seed S] [--force]\n"
     "       msgs synth --raw micasense|dji|p4m|sequoia --out DIR [--preset P] [--captures N] [--width W]\n"
     "                  [--light-variation V] [--dls-bias B] [--panel-captures N] [--panel-before]\n"
-    "                  [--light-drift D] [--dls1] [--heading-bias H] [--seed S] [--force]\n"
+    "                  [--light-drift D] [--dls1] [--heading-bias H] [--dark-panel]\n"
+    "                  [--path-reflectance P] [--seed S] [--force]\n"
     "\n"
     "Ray-trace a procedural outdoor scene (lawn, soil, trees, solar panels, pond, painted pad) seen\n"
     "by a 5-camera drone rig (RGB + G, R, RE, NIR) and write it in the public multi-spectral dataset\n"
@@ -59,7 +60,12 @@ constexpr const char* kUsage =
     "  --heading-bias H  the light sensor (MicaSense, DJI) reads 1 + H cos(yaw - 20 deg) x the sunlight\n"
     "               (-0.5 to 0.5; default 0), as a sensor that sits off the drone's centre or is shaded\n"
     "               by its body does: flight lines that turn back make it alternate; `msgs import`\n"
-    "               reports it and --light-sensor-heading correct divides it out\n";
+    "               reports it and --light-sensor-heading correct divides it out\n"
+    "  --dark-panel every second panel capture after the flight shows a dark panel (reflectance about\n"
+    "               0.1, the grey one's about 0.5): panels of two reflectances, from which `msgs\n"
+    "               import --radiometry panel` fits an empirical line (needs --panel-captures 2 or more)\n"
+    "  --path-reflectance P  haze: every band of every capture sees P more reflectance (0 to 0.2;\n"
+    "               default 0), light in proportion to the sunlight, which the line's offset takes out\n";
 
 int run_raw(const msgs::cli::Args& args) {
   msgs::synth::RawOptions opt;
@@ -78,6 +84,8 @@ int run_raw(const msgs::cli::Args& args) {
   opt.light_drift = args.number("light-drift", 0.0);
   opt.dls1 = args.flag("dls1");
   opt.heading_bias = args.number("heading-bias", 0.0);
+  opt.dark_panel = args.flag("dark-panel");
+  opt.path_reflectance = args.number("path-reflectance", 0.0);
   opt.overwrite = args.flag("force");
   const std::string out = args.require("out");
   msgs::synth::RawSummary s;
@@ -106,8 +114,8 @@ int run_synth(const std::vector<std::string>& argv) {
   const msgs::cli::Args args(
       argv,
       {"preset", "out", "seed", "raw", "captures", "width", "light-variation", "dls-bias", "panel-captures", "light-drift",
-       "heading-bias"},
-      {"force", "help", "panel-before", "dls1"});
+       "heading-bias", "path-reflectance"},
+      {"force", "help", "panel-before", "dls1", "dark-panel"});
   if (args.flag("help")) {
     std::fputs(kUsage, stdout);
     return 0;
@@ -115,9 +123,10 @@ int run_synth(const std::vector<std::string>& argv) {
   if (!args.positional().empty()) throw msgs::cli::UsageError("unexpected argument '" + args.positional()[0] + "'");
   if (args.has("raw")) return run_raw(args);
   for (const char* o :
-       {"captures", "width", "light-variation", "dls-bias", "panel-captures", "light-drift", "heading-bias"})
+       {"captures", "width", "light-variation", "dls-bias", "panel-captures", "light-drift", "heading-bias",
+        "path-reflectance"})
     if (args.has(o)) throw msgs::cli::UsageError(std::string("--") + o + " needs --raw");
-  for (const char* f : {"panel-before", "dls1"})
+  for (const char* f : {"panel-before", "dls1", "dark-panel"})
     if (args.flag(f)) throw msgs::cli::UsageError(std::string("--") + f + " needs --raw");
   msgs::synth::SynthOptions opt;
   opt.preset = args.get("preset", "tiny");

@@ -710,6 +710,45 @@ TEST_CASE("msgs import --radiometry panel: panels before and after the flight, i
   }
 }
 
+TEST_CASE("msgs import --radiometry panel: a grey and a dark panel give an empirical line that takes out haze") {
+  // Haze adds 0.05 to every reflectance the cameras see, the panels' too. Through zero, the grey
+  // panel (about 0.5) would give 1.1 times the light and the dark one (about 0.1) 1.5 times, and
+  // every image their mean's error; the line through both gives the light and the offset.
+  msgs::synth::RawOptions opt = small_micasense_set();
+  opt.panel_captures = 2;
+  opt.dark_panel = true;
+  opt.path_reflectance = 0.05;
+  msgs::synth::RawOptions one = opt;
+  one.panel_captures = 1;
+  CHECK_THROWS_WITH_AS(msgs::synth::write_synthetic_raw(msgs::testing::scratch_dir("import") / "dark1", one),
+                       "a dark panel needs 2 panel captures or more (every second one shows it)", std::invalid_argument);
+  const auto dir_or = colmap_case("panel_line", "the empirical line of a grey and a dark panel", opt);
+  if (!dir_or) return;
+  const fs::path& dir = *dir_or;
+  const auto ok = import_ok(dir, "ds", "--radiometry panel");
+  REQUIRE_MESSAGE(ok.first == 0, ok.second);
+  CHECK_MESSAGE(ok.second.find("MS_NIR: panels of reflectance 0.108 to 0.526 in 1 session lie on a line with an offset"
+                               " of 0.0") != std::string::npos,
+                ok.second);
+  CHECK(ok.second.find("panel pictures disagree") == std::string::npos);
+  const Json tf = Json::parse(slurp(dir / "ds" / "transforms.json"));
+  const auto& lines = tf["msgs_import"]["calibration_panel_lines"];
+  REQUIRE(lines.size() == 4);
+  for (const auto& item : lines.items()) {
+    CAPTURE(item.key());
+    CHECK(item.value()["offset"].get<double>() == doctest::Approx(0.05).epsilon(0.002).scale(0));
+    CHECK(item.value()["sessions"] == 1);
+  }
+  REQUIRE(tf["frames"].size() == 20);
+  const msgs::synth::SynthScene scene = msgs::synth::make_scene(raw_set_preset(opt), opt.seed);
+  for (const auto& f : tf["frames"]) {
+    CHECK(f["radiometry"].value("offset", 0.0) == doctest::Approx(0.05).epsilon(0.002).scale(0));
+    CHECK(f["radiometry"]["formula"].get<std::string>().find(" * scale - offset") != std::string::npos);
+    CHECK_MESSAGE(median_ratio_to_truth(dir, dir / "ds", f, scene, opt) == doctest::Approx(1.0).epsilon(0.01).scale(0),
+                  f["source"].get<std::string>());
+  }
+}
+
 TEST_CASE("msgs import: a DJI flight's sunlight sensor, with the panel pictures listed by hand or without") {
   // A Mavic 3M marks no panel pictures: the panel capture after the flight (0007) is listed with
   // its areas in panels.json. The light changes by up to 25% from capture to capture, and the

@@ -24,6 +24,7 @@
 #include <cstddef>
 #include <filesystem>
 #include <optional>
+#include <string>
 #include <vector>
 
 #include "msgs/image.hpp"
@@ -143,12 +144,122 @@ struct PanelIrradiance {
   std::optional<double> time_s;
 };
 
+/// The session of each panel picture taken at `time_s` (in its order): 0, 1, .. in time, a new one
+/// after a gap of more than kPanelSessionGap; all 0 when some picture has no time.
+inline std::vector<std::size_t> panel_sessions(const std::vector<std::optional<double>>& time_s) {
+  std::vector<std::size_t> session(time_s.size(), 0);
+  if (!std::all_of(time_s.begin(), time_s.end(), [](const auto& t) { return t.has_value(); })) return session;
+  std::vector<std::size_t> order(time_s.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return *time_s[a] < *time_s[b]; });
+  for (std::size_t k = 1; k < order.size(); ++k)
+    session[order[k]] = session[order[k - 1]] + (*time_s[order[k]] - *time_s[order[k - 1]] > kPanelSessionGap ? 1 : 0);
+  return session;
+}
+
+/// Panels of several reflectances in one session: their mean response over the area against the
+/// reflectance rho is a line, response = E (rho + offset), whose offset (haze between camera and
+/// ground, which adds light in proportion to the sunlight as if every surface reflected that much
+/// more; a black level a little off) a panel of one reflectance cannot tell from E. The lowest
+/// reflectance of a session has to lie this many times below its highest for the line to be fitted.
+inline constexpr double kPanelLineAlbedoRatio = 2.0;
+/// The largest offset, in reflectance, the line may have: haze adds a few hundredths, a black
+/// level a little off less; more says a panel's reflectance or area is mistaken.
+inline constexpr double kMaxPanelLineOffset = 0.25;
+
+/// One panel picture's mean response over its area, its panel's reflectance and its time.
+struct PanelResponse {
+  double response = 0.0;
+  double albedo = 0.0;
+  std::optional<double> time_s;
+};
+
+/// The empirical line's offset of a band, in reflectance: the reflectance of a pixel is
+/// response / E - offset, and a panel picture's E = response / (albedo + offset).
+struct PanelLine {
+  double offset = 0.0;
+  std::size_t sessions = 0;     ///< the sessions whose panels of several reflectances gave it
+  double low_albedo = 0.0, high_albedo = 0.0;  ///< the reflectances they spanned
+  std::string problem;          ///< why no offset was fitted (empty when it was)
+};
+
+/// Fit the offset of `pictures` (responses > 0, albedos in (0, 1]): in each session (panel_sessions)
+/// whose reflectances span kPanelLineAlbedoRatio, the least-squares line response = a rho + b gives
+/// offset b / a; the offset is their mean, weighted by the pictures. A problem, offset 0 (the line
+/// through zero), where no session spans the ratio; a line that falls with the reflectance, an
+/// offset beyond kMaxPanelLineOffset or one that would leave a panel's albedo + offset not
+/// positive is a problem too.
+inline PanelLine panel_line(const std::vector<PanelResponse>& pictures) {
+  PanelLine line;
+  std::vector<std::optional<double>> times;
+  for (const PanelResponse& p : pictures) times.push_back(p.time_s);
+  const std::vector<std::size_t> session = panel_sessions(times);
+  const std::size_t sessions = pictures.empty() ? 0 : *std::max_element(session.begin(), session.end()) + 1;
+  double weighted = 0.0, weight = 0.0, low = 1e300, high = 0.0;
+  for (std::size_t s = 0; s < sessions; ++s) {
+    double n = 0.0, sr = 0.0, sv = 0.0, lo = 1e300, hi = 0.0;
+    for (std::size_t i = 0; i < pictures.size(); ++i)
+      if (session[i] == s) {
+        n += 1.0;
+        sr += pictures[i].albedo;
+        sv += pictures[i].response;
+        lo = std::min(lo, pictures[i].albedo);
+        hi = std::max(hi, pictures[i].albedo);
+      }
+    if (!(hi >= kPanelLineAlbedoRatio * lo)) continue;
+    double srr = 0.0, srv = 0.0;  // centred sums
+    for (std::size_t i = 0; i < pictures.size(); ++i)
+      if (session[i] == s) {
+        const double dr = pictures[i].albedo - sr / n;
+        srr += dr * dr;
+        srv += dr * (pictures[i].response - sv / n);
+      }
+    const double a = srv / srr, b = sv / n - a * sr / n;
+    if (!(a > 0.0) || !std::isfinite(b)) {
+      line.problem = cat("the panels of reflectance ", short_number(lo, 3), " to ", short_number(hi, 3),
+                         " read no brighter for the higher reflectance: a panel's reflectance or area mistaken?");
+      line.offset = 0.0;
+      return line;
+    }
+    weighted += n * (b / a);
+    weight += n;
+    ++line.sessions;
+    low = std::min(low, lo);
+    high = std::max(high, hi);
+  }
+  if (line.sessions == 0) {
+    line.problem = cat("no session holds panels whose reflectances lie ", short_number(kPanelLineAlbedoRatio),
+                       " times apart");
+    return line;
+  }
+  line.offset = weighted / weight;
+  line.low_albedo = low;
+  line.high_albedo = high;
+  if (!(std::abs(line.offset) <= kMaxPanelLineOffset)) {
+    line.problem = cat("the fitted offset, ", short_number(line.offset, 3), ", is more than haze or a black level",
+                       " gives (at most ", short_number(kMaxPanelLineOffset), " either way): a panel's reflectance or",
+                       " area mistaken?");
+    line.offset = 0.0;
+    return line;
+  }
+  for (const PanelResponse& p : pictures)
+    if (!(p.albedo + line.offset > 0.0)) {
+      line.problem = cat("the fitted offset, ", short_number(line.offset, 3), ", would leave the panel of reflectance ",
+                         short_number(p.albedo, 3), " no light: the line does not describe these panels");
+      line.offset = 0.0;
+      return line;
+    }
+  return line;
+}
+
 /// A band's irradiance through the flight, from its panel pictures.
 struct PanelSchedule {
   /// One node per session, (mean time, mean E), in time order; a single node when some picture
   /// has no time or all of them make one session.
   std::vector<std::array<double, 2>> nodes;
   double mean = 0.0;  ///< E over all the pictures
+  /// The empirical line's offset (panel_line): a pixel's reflectance is response / at(t) - offset.
+  double offset = 0.0;
   /// Whether the irradiance follows time (two sessions or more).
   bool timed() const { return nodes.size() > 1; }
   /// E at time t: linear between the sessions around it, the nearest session's before the first
@@ -167,33 +278,33 @@ struct PanelSchedule {
 };
 
 /// The schedule of a band's panel pictures (at least one, each E > 0).
-inline PanelSchedule panel_schedule(std::vector<PanelIrradiance> pictures) {
+inline PanelSchedule panel_schedule(const std::vector<PanelIrradiance>& pictures) {
   PanelSchedule s;
   if (pictures.empty()) return s;
   for (const PanelIrradiance& p : pictures) s.mean += p.e;
   s.mean /= double(pictures.size());
-  const bool all_timed =
-      std::all_of(pictures.begin(), pictures.end(), [](const PanelIrradiance& p) { return p.time_s.has_value(); });
-  if (!all_timed) {
+  std::vector<std::optional<double>> times;
+  for (const PanelIrradiance& p : pictures) times.push_back(p.time_s);
+  const std::vector<std::size_t> session = panel_sessions(times);
+  const std::size_t sessions = *std::max_element(session.begin(), session.end()) + 1;
+  if (sessions == 1 && !std::all_of(times.begin(), times.end(), [](const auto& t) { return t.has_value(); })) {
     s.nodes.push_back({0.0, s.mean});
     return s;
   }
-  std::stable_sort(pictures.begin(), pictures.end(),
-                   [](const PanelIrradiance& a, const PanelIrradiance& b) { return *a.time_s < *b.time_s; });
-  double t_sum = 0.0, e_sum = 0.0, last = *pictures.front().time_s;
-  int n = 0;
-  for (const PanelIrradiance& p : pictures) {
-    if (n > 0 && *p.time_s - last > kPanelSessionGap) {
-      s.nodes.push_back({t_sum / n, e_sum / n});
-      t_sum = e_sum = 0.0;
-      n = 0;
-    }
-    t_sum += *p.time_s;
-    e_sum += p.e;
-    ++n;
-    last = *p.time_s;
+  std::vector<std::size_t> order(pictures.size());  // summed in time order
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return *times[a] < *times[b]; });
+  for (std::size_t k = 0; k < sessions; ++k) {
+    double t_sum = 0.0, e_sum = 0.0;
+    int n = 0;
+    for (std::size_t i : order)
+      if (session[i] == k) {
+        t_sum += *pictures[i].time_s;
+        e_sum += pictures[i].e;
+        ++n;
+      }
+    s.nodes.push_back({t_sum / n, e_sum / n});
   }
-  s.nodes.push_back({t_sum / n, e_sum / n});
   return s;
 }
 

@@ -26,9 +26,11 @@
 // does): a picture of a panel of known reflectance rho (its albedo) gives the band's irradiance in
 // the sensor's own units, E = mean over the panel's area of (DN - black_level) / response / rho,
 // and every image of the band becomes R = (DN - black_level) / (response * E). With several panel
-// pictures, E is their mean. `--radiometry panel+dls` (MicaSense's tutorial 3) keeps the light
-// sensor for the changes of the sunlight during the flight and lets the panel set its level: the
-// response then includes the DLS 2 irradiance of each picture, the panel's and the flight's.
+// pictures, E is their mean. Panels of several reflectances in one session give an empirical
+// line, response = E (rho + offset) (msgs/io/calibration_panel.hpp), and R loses the offset.
+// `--radiometry panel+dls` (MicaSense's tutorial 3) keeps the light sensor for the changes of the
+// sunlight during the flight and lets the panel set its level: the response then includes the
+// DLS 2 irradiance of each picture, the panel's and the flight's.
 // DJI's sunlight sensor takes the DLS 2's place there, in its own units.
 //
 // Reflectance up to one factor common to all bands (`--radiometry sun-sensor`, as DJI's image
@@ -76,6 +78,9 @@ struct FrameRadiometry {
   double radiance_a1 = 0.0;           ///< MicaSense's a1 (reflectance only)
   double gain_adjustment = 0.0;       ///< DJI's SensorGainAdjustment (sun-sensor only)
   double scale = 1.0;  ///< common factor of the band; for reflectance pi a1 / 2^bits
+  /// Subtracted after the scale: the offset of the empirical line that calibration panels of
+  /// several reflectances give (PanelLine; 0 otherwise)
+  double offset = 0.0;
 };
 
 /// What a band's values are made to mean.
@@ -280,9 +285,9 @@ inline void check_edge_falloff(double edge, const std::string& model, const std:
 /// positive over the image and does not brighten its edge); IoError naming `file` otherwise.
 inline void check_radiometry(const FrameRadiometry& r, int width, int height, const std::filesystem::path& file) {
   if (!(r.dn_max > 0) || !std::isfinite(r.black_level) || !(r.exposure_s > 0) || !(r.gain > 0) ||
-      !std::isfinite(r.exposure_s * r.gain) || !(r.scale > 0) || !std::isfinite(r.scale))
+      !std::isfinite(r.exposure_s * r.gain) || !(r.scale > 0) || !std::isfinite(r.scale) || !std::isfinite(r.offset))
     fail(file, cat("radiometric parameters out of range (black level ", r.black_level, ", exposure ", r.exposure_s,
-                   " s, gain ", r.gain, ", scale ", r.scale, ")"));
+                   " s, gain ", r.gain, ", scale ", r.scale, ", offset ", r.offset, ")"));
   if (r.steps.irradiance && (!(r.irradiance > 0) || !std::isfinite(r.irradiance * r.exposure_s * r.gain)))
     fail(file, cat("light sensor reading ", r.irradiance, " out of range (expected > 0;",
                    " --radiometry auto gives relative radiance without it)"));
@@ -332,7 +337,8 @@ inline void check_radiometry(const FrameRadiometry& r, int width, int height, co
 }
 
 /// Normalise an image read as [0, 1] (stored value x dn_max = DN), single channel or not: every
-/// channel gets the same correction. Negative results (noise below the black level) become 0;
+/// channel gets the same correction, the offset subtracted last. Negative results (noise below the
+/// black level, a surface darker than the empirical line's offset) become 0;
 /// values are not clamped above, so the caller can find the band's maximum with scale = 1.
 inline Image<float> normalise_image(const Image<float>& raw, const FrameRadiometry& r, const std::filesystem::path& file) {
   check_radiometry(r, raw.width, raw.height, file);
@@ -342,7 +348,7 @@ inline Image<float> normalise_image(const Image<float>& raw, const FrameRadiomet
       const double k = r.scale / sensor_response(r, x, y);
       for (int c = 0; c < raw.channels; ++c) {
         const double dn = double(raw.at(x, y, c)) * r.dn_max;
-        out.at(x, y, c) = float(std::max(0.0, (dn - r.black_level) * k));
+        out.at(x, y, c) = float(std::max(0.0, (dn - r.black_level) * k - r.offset));
       }
     }
   return out;

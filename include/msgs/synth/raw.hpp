@@ -57,6 +57,9 @@
 // (Camera:CalibrationPicture 2, Camera:Albedo, Camera:ReflectArea: the corners of the panel's inner
 // area, whole pixels, and Camera:PanelSerial); for the other cameras, which do not, the set holds
 // panels.json, the list `msgs import --panels` reads (msgs/io/panel_list.hpp) with the same areas.
+// With RawOptions::dark_panel every second panel capture after the flight shows a dark panel
+// (raw_dark_panel_albedo()), and RawOptions::path_reflectance adds haze: light in proportion to
+// the sunlight, as if every surface reflected that much more (the offset of an empirical line).
 #pragma once
 
 #include <nlohmann/json.hpp>
@@ -116,6 +119,11 @@ struct RawOptions {
   /// would read level: a sensor whose tilt its firmware leaves partly in, so that readings on the
   /// flight lines of raw_attitude differ by (1 + this) / (1 - this); -0.5 .. 0.5.
   double heading_bias = 0.0;
+  /// Every second panel capture after the flight shows a dark panel (raw_dark_panel_albedo).
+  bool dark_panel = false;
+  /// Haze between the camera and the ground: every band sees this much more reflectance, in
+  /// every capture (the panels' too); 0 .. 0.2.
+  double path_reflectance = 0.0;
   bool overwrite = false;
 };
 
@@ -252,6 +260,10 @@ inline double raw_irradiance(double nm) { return 1.45 - 0.0006 * (nm - 475.0); }
 /// The reflectance of the synthetic calibration panel at wavelength `nm` (MicaSense's panels are
 /// about 0.49 to 0.53 from blue to near infra-red).
 inline double raw_panel_albedo(double nm) { return 0.49 + 0.04 * (nm - 475.0) / 400.0; }
+
+/// The reflectance of the dark panel of RawOptions::dark_panel at wavelength `nm` (a dark grey
+/// tarp, about 0.09 to 0.11).
+inline double raw_dark_panel_albedo(double nm) { return 0.09 + 0.02 * (nm - 475.0) / 400.0; }
 
 /// Does `camera` write DJI's tags (drone-dji namespace, a vignetting correction)?
 inline bool dji_camera(std::string_view camera) { return camera == "dji" || camera == "p4m"; }
@@ -439,6 +451,10 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
     throw std::invalid_argument("the light sensor's heading bias must be -0.5 .. 0.5");
   if (opt.heading_bias != 0.0 && opt.camera != "micasense" && !dji_camera(opt.camera))
     throw std::invalid_argument("a heading bias needs a camera with a light sensor (micasense, dji, p4m)");
+  if (opt.dark_panel && opt.panel_captures < 2)
+    throw std::invalid_argument("a dark panel needs 2 panel captures or more (every second one shows it)");
+  if (!(opt.path_reflectance >= 0.0 && opt.path_reflectance <= 0.2))
+    throw std::invalid_argument("the path reflectance must be 0 .. 0.2");
   if (opt.captures > 0) preset.captures = opt.captures;
   if (opt.width > 0) {
     preset.ms_width = opt.width;
@@ -545,16 +561,19 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
                                         : std::vector<double>{0, -0.30 / (rmax * rmax), 0, 0.02 / std::pow(rmax, 4), 0, 0};
       // The panel as this lens sees it: a little off-centre, differently per band.
       const double pdx = 0.03 * (double(bi) - 2.0), pdy = 0.02 * (double(bi % 2) - 0.5);
+      const double albedo = opt.dark_panel && ci >= sum.captures && (ci - sum.captures) % 2 == 1
+                                ? raw_dark_panel_albedo(b.wavelength_nm)
+                                : raw_panel_albedo(b.wavelength_nm);
       if (panel && !micasense) {  // listed for --panels, as a user would from the pictures
         nlohmann::ordered_json pic;
         pic["file"] = raw_file_name(opt.camera, b, ci, sum.captures);
         pic["area"] = detail::panel_area(cam.width, cam.height, pdx, pdy);
-        pic["albedo"] = raw_panel_albedo(b.wavelength_nm);
+        pic["albedo"] = albedo;
         panel_list.push_back(pic);
       }
       const Image<float> L =
           panel ? detail::panel_radiance(cam.width, cam.height, detail::panel_square(cam.width, cam.height, 0.36, pdx, pdy),
-                                         raw_panel_albedo(b.wavelength_nm))
+                                         albedo)
                 : detail::render_radiance(scene, cam, b.spectrum_channel, rs);
       std::vector<std::uint16_t> dn(L.data.size());
       const double bl = black ? black_level : 0.0;
@@ -570,7 +589,8 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
             fall = dji ? 1.0 / (1.0 + p) : 1.0 + p;
           }
           const double row = micasense ? 1.0 + row_a2 * y / e.exposure_s - row_a3 * y : 1.0;
-          const double v = bl + double(L.at(x, y, 0)) * e.exposure_s * e.gain() * fall * row * b.sensitivity * light;
+          const double v = bl + (double(L.at(x, y, 0)) + opt.path_reflectance) * e.exposure_s * e.gain() * fall * row *
+                                    b.sensitivity * light;
           dn[std::size_t(y) * std::size_t(cam.width) + std::size_t(x)] =
               static_cast<std::uint16_t>(std::lround(std::clamp(v, 0.0, 65535.0)));
         }
@@ -633,7 +653,7 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
             for (const auto& c : detail::panel_area(cam.width, cam.height, pdx, pdy))
               area += io::cat(area.empty() ? "" : ",", c[0], ",", c[1]);
             attrs.emplace_back("Camera:CalibrationPicture", "2");
-            attrs.emplace_back("Camera:Albedo", detail::g10(raw_panel_albedo(b.wavelength_nm)));
+            attrs.emplace_back("Camera:Albedo", detail::g10(albedo));
             attrs.emplace_back("Camera:ReflectArea", area);
             attrs.emplace_back("Camera:PanelSerial", "RP04-1234567-OB");
           }
