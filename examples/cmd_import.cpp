@@ -139,7 +139,10 @@ constexpr const char* kUsage =
     "                      part in that image, x and y in pixels, in order around it; albedo per\n"
     "                      picture or for all (else Camera:Albedo or --panel-albedo). Their\n"
     "                      captures are set aside in every mode; with panel and panel+dls each\n"
-    "                      listed picture calibrates its band\n"
+    "                      listed picture calibrates its band. List a picture once for each panel\n"
+    "                      it shows: panels of reflectances 2 times apart or more in one session\n"
+    "                      give an empirical line, response = E (albedo + offset), whose offset\n"
+    "                      (haze, a black level a little off) every image then loses\n"
     "  --matching M        image pairs COLMAP matches: exhaustive (default: every pair; the time\n"
     "                      grows with the square of the image count), window (the bands of a\n"
     "                      capture with each other, and each band with the same band of the next\n"
@@ -1151,7 +1154,9 @@ int run_import(const std::vector<std::string>& argv) {
   std::vector<Item> panels;
   std::vector<std::string> panel_keys;
   {
-    // The pictures listed in --panels count as marked by the camera, with the list's area and albedo.
+    // The pictures listed in --panels count as marked by the camera, with the list's area and albedo;
+    // a picture listed again for another panel in it is calibrated from that one too (`more_panels`).
+    std::map<fs::path, std::vector<std::size_t>> more_panels;  // source -> its further entries in the list
     for (std::size_t i = 0; i < panel_list.size(); ++i) {
       const msgs::io::PanelPicture& p = panel_list[i];
       const auto it = std::find_if(items.begin(), items.end(), [&](const Item& x) { return x.source == p.file; });
@@ -1160,6 +1165,10 @@ int run_import(const std::vector<std::string>& argv) {
              cat("'", p.file.generic_string(), "' is not ",
                  it == items.end() ? "one of the band images found in --images (a typo, or a file the names scheme skipped)"
                                    : "a multispectral band's image (the RGB camera's are not calibrated)"));
+      if (it->meta.source.count("panel_area") && it->meta.source.at("panel_area") == "--panels") {
+        more_panels[p.file].push_back(i);
+        continue;
+      }
       it->meta.calibration_picture = 2;
       it->meta.panel_area = p.area;
       it->meta.source["panel_area"] = "--panels";
@@ -1185,6 +1194,15 @@ int run_import(const std::vector<std::string>& argv) {
         }
         panels.push_back(std::move(it));
       }
+      for (std::size_t k = 0, n = panels.size(); k < n; ++k)
+        if (const auto more = more_panels.find(panels[k].source); more != more_panels.end())
+          for (std::size_t i : more->second) {
+            Item other = panels[k];
+            other.meta.panel_area = panel_list[i].area;
+            other.meta.panel_albedo = panel_list[i].albedo;
+            if (!panel_list[i].albedo) other.meta.source.erase("panel_albedo");
+            panels.push_back(std::move(other));
+          }
       std::vector<msgs::io::CaptureFiles> flight;
       for (std::size_t ci = 0; ci < scan.captures.size(); ++ci)
         if (!marked.count(ci)) flight.push_back(std::move(scan.captures[ci]));

@@ -110,11 +110,25 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     }
   });
   fuzz::expect_io_error_only("parse_panel_list", [&] {
-    for (const io::PanelPicture& p : io::parse_panel_list(text, "panels.json"))
+    std::vector<io::PanelResponse> responses;  // the listed panels as an empirical line's points
+    for (const io::PanelPicture& p : io::parse_panel_list(text, "panels.json")) {
       if (!io::convex_quad(p.area) || (p.albedo && !(*p.albedo > 0 && *p.albedo <= 1)) || p.file.is_absolute()) {
         std::fprintf(stderr, "parse_panel_list: a picture that should have been refused\n");
         std::abort();
       }
+      // A positive response and a time from the corners, however large or odd.
+      responses.push_back({1e-3 + std::abs(std::fmod(p.area[0][0], 1e6)), p.albedo.value_or(0.5),
+                           std::fmod(p.area[0][1], 1e5)});
+    }
+    // The line's offset is finite and leaves every panel light, or there is none and a reason.
+    const io::PanelLine line = io::panel_line(responses);
+    bool bad = !std::isfinite(line.offset) || (line.problem.empty() && line.sessions == 0) ||
+               (!line.problem.empty() && line.offset != 0.0);
+    for (const io::PanelResponse& r : responses) bad = bad || !(r.albedo + line.offset > 0);
+    if (bad || std::abs(line.offset) > io::kMaxPanelLineOffset) {
+      std::fprintf(stderr, "panel_line: an offset that is not finite, leaves a panel no light, or lacks a reason\n");
+      std::abort();
+    }
   });
   std::vector<std::string> names(lines.begin() + (lines.empty() ? 0 : 1), lines.end());
   fuzz::expect_io_error_only("split_exiv2_output", [&] {

@@ -710,6 +710,33 @@ TEST_CASE("msgs import --radiometry panel: panels before and after the flight, i
   }
 }
 
+/// After an import of dir/raw (a set of `opt`, haze `opt.path_reflectance`) into dir/ds whose
+/// panels of two reflectances gave every band an empirical line: the line's offset is the haze, in
+/// transforms.json and in each of the 20 band frames, and every one comes within 1% of the
+/// scene's reflectance.
+void check_panel_line(const fs::path& dir, const msgs::synth::RawOptions& opt, const std::string& log) {
+  CHECK(log.find("panel pictures disagree") == std::string::npos);
+  const Json tf = Json::parse(slurp(dir / "ds" / "transforms.json"));
+  const auto& lines = tf["msgs_import"]["calibration_panel_lines"];
+  REQUIRE(lines.size() == 4);
+  for (const auto& item : lines.items()) {
+    CAPTURE(item.key());
+    CHECK(item.value()["offset"].get<double>() == doctest::Approx(opt.path_reflectance).epsilon(0.002).scale(0));
+    CHECK(item.value()["sessions"] == 1);
+  }
+  const msgs::synth::SynthScene scene = msgs::synth::make_scene(raw_set_preset(opt), opt.seed);
+  int bands = 0;
+  for (const auto& f : tf["frames"]) {
+    if (f["mm_channel"] == "D") continue;  // (the RGB camera's, not calibrated)
+    ++bands;
+    CHECK(f["radiometry"].value("offset", 0.0) == doctest::Approx(opt.path_reflectance).epsilon(0.002).scale(0));
+    CHECK(f["radiometry"]["formula"].get<std::string>().find(" * scale - offset") != std::string::npos);
+    CHECK_MESSAGE(median_ratio_to_truth(dir, dir / "ds", f, scene, opt) == doctest::Approx(1.0).epsilon(0.01).scale(0),
+                  f["source"].get<std::string>());
+  }
+  CHECK(bands == 20);
+}
+
 TEST_CASE("msgs import --radiometry panel: a grey and a dark panel give an empirical line that takes out haze") {
   // Haze adds 0.05 to every reflectance the cameras see, the panels' too. Through zero, the grey
   // panel (about 0.5) would give 1.1 times the light and the dark one (about 0.1) 1.5 times, and
@@ -730,23 +757,37 @@ TEST_CASE("msgs import --radiometry panel: a grey and a dark panel give an empir
   CHECK_MESSAGE(ok.second.find("MS_NIR: panels of reflectance 0.108 to 0.526 in 1 session lie on a line with an offset"
                                " of 0.0") != std::string::npos,
                 ok.second);
-  CHECK(ok.second.find("panel pictures disagree") == std::string::npos);
+  check_panel_line(dir, opt, ok.second);
+}
+
+TEST_CASE("msgs import --radiometry panel: a dark tarp beside the panel, listed as a second area of the same picture") {
+  // A DJI set with one panel capture under haze of 0.03; panels.json lists each panel picture
+  // twice: the grey panel's area, and a strip of the darker ground around it, whose reflectance the
+  // synthetic picture makes 0.08 + 0.04 y / (height - 1): 0.09 on average over rows 20 to 40.
+  msgs::synth::RawOptions opt = small_micasense_set();
+  opt.camera = "dji";
+  opt.panel_captures = 1;
+  opt.path_reflectance = 0.03;
+  const auto dir_or = colmap_case("panel_tarp", "two panels listed in one picture", opt);
+  if (!dir_or) return;
+  const fs::path& dir = *dir_or;
+  Json list = Json::parse(slurp(dir / "raw" / "panels.json"));
+  const Json grey = list["pictures"];
+  REQUIRE(grey.size() == 4);
+  const int height = 120;
+  for (const auto& g : grey) {
+    Json dark = g;
+    dark["area"] = {{10, 20}, {40, 20}, {40, 40}, {10, 40}};  // rows 20-40 (or 21-39): 30 on average
+    dark["albedo"] = 0.08 + 0.04 * 30.0 / (height - 1);
+    list["pictures"].push_back(dark);
+  }
+  msgs::io::write_text_atomic(dir / "panels2.json", list.dump(1));
+  const auto ok = import_ok(dir, "ds", "--radiometry panel --panels '" + (dir / "panels2.json").string() + "'");
+  REQUIRE_MESSAGE(ok.first == 0, ok.second);
+  CHECK_MESSAGE(ok.second.find("MS_NIR: panels of reflectance 0.0901 to 0.") != std::string::npos, ok.second);
   const Json tf = Json::parse(slurp(dir / "ds" / "transforms.json"));
-  const auto& lines = tf["msgs_import"]["calibration_panel_lines"];
-  REQUIRE(lines.size() == 4);
-  for (const auto& item : lines.items()) {
-    CAPTURE(item.key());
-    CHECK(item.value()["offset"].get<double>() == doctest::Approx(0.05).epsilon(0.002).scale(0));
-    CHECK(item.value()["sessions"] == 1);
-  }
-  REQUIRE(tf["frames"].size() == 20);
-  const msgs::synth::SynthScene scene = msgs::synth::make_scene(raw_set_preset(opt), opt.seed);
-  for (const auto& f : tf["frames"]) {
-    CHECK(f["radiometry"].value("offset", 0.0) == doctest::Approx(0.05).epsilon(0.002).scale(0));
-    CHECK(f["radiometry"]["formula"].get<std::string>().find(" * scale - offset") != std::string::npos);
-    CHECK_MESSAGE(median_ratio_to_truth(dir, dir / "ds", f, scene, opt) == doctest::Approx(1.0).epsilon(0.01).scale(0),
-                  f["source"].get<std::string>());
-  }
+  CHECK(tf["msgs_import"]["calibration_panels"].size() == 8);  // two areas in each of the 4 pictures
+  check_panel_line(dir, opt, ok.second);
 }
 
 TEST_CASE("msgs import: a DJI flight's sunlight sensor, with the panel pictures listed by hand or without") {

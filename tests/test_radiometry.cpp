@@ -640,6 +640,15 @@ TEST_CASE("panel list: pictures, areas and albedos as --panels reads them; malfo
   CHECK(!parse_panel_list(R"({"pictures": [{"file": "a.tif", "area": [[0, 0], [9, 0], [9, 9], [0, 9]]}]})", "p.json")[0].albedo);
 
   const std::string good = R"("area": [[0, 0], [9, 0], [9, 9], [0, 9]])";
+  // A picture of two panels (a grey one and a dark tarp): listed once for each.
+  const auto two = parse_panel_list(R"({"pictures": [{"file": "a.tif", )" + good +
+                                        R"(, "albedo": 0.5}, {"file": "a.tif", "area": [[20, 0], [29, 0], [29, 9], [20, 9]],)"
+                                        R"( "albedo": 0.1}]})",
+                                    "p.json");
+  REQUIRE(two.size() == 2);
+  CHECK(two[0].file == two[1].file);
+  CHECK(two[1].area[0] == std::array<double, 2>{20, 0});
+  CHECK(*two[1].albedo == 0.1);
   const std::vector<std::pair<std::string, std::string>> bad = {
       {"{", "p.json: invalid JSON"},
       {"[]", "field 'pictures'"},
@@ -648,7 +657,8 @@ TEST_CASE("panel list: pictures, areas and albedos as --panels reads them; malfo
       {R"({"pictures": [{"area": [[0, 0], [9, 0], [9, 9], [0, 9]]}]})", "field 'pictures[0].file'"},
       {R"({"pictures": [{"file": "/abs/a.tif", )" + good + "}]}", "is not a path inside --images"},
       {R"({"pictures": [{"file": "../a.tif", )" + good + "}]}", "is not a path inside --images"},
-      {R"({"pictures": [{"file": "a.tif", )" + good + R"(}, {"file": "./a.tif", )" + good + "}]}", "is listed twice"},
+      {R"({"pictures": [{"file": "a.tif", )" + good + R"(}, {"file": "./a.tif", "area": [[0, 0.0], [9, 0], [9, 9], [0, 9]]}]})",
+       "'a.tif' is listed twice with the same area"},
       {R"({"pictures": [{"file": "a.tif", "area": [[0, 0], [9, 0], [9, 9]]}]})", "field 'pictures[0].area'"},
       {R"({"pictures": [{"file": "a.tif", "area": [[0, 0], [9, 0], [9, 9], [0, "9"]]}]})", "field 'pictures[0].area'"},
       {R"({"pictures": [{"file": "a.tif", "area": [[0, 0], [9, 9], [9, 0], [0, 9]]}]})", "convex"},

@@ -13,7 +13,9 @@
 //     ]
 //   }
 //
-// The corners go once around a convex area, in either direction, in the image as stored.
+// The corners go once around a convex area, in either direction, in the image as stored. A picture
+// that shows several panels (a grey panel and a dark tarp side by side, for an empirical line) is
+// listed once for each, with its area and albedo.
 #pragma once
 
 #include <cmath>
@@ -22,6 +24,7 @@
 #include <set>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -58,7 +61,7 @@ inline std::vector<PanelPicture> parse_panel_list(std::string_view text, const s
   std::optional<double> common;
   if (j.contains("albedo")) common = albedo_of(j["albedo"], "albedo");
   std::vector<PanelPicture> out;
-  std::set<std::string> seen;
+  std::set<std::pair<std::string, PanelArea>> seen;  // (file, area)
   for (std::size_t i = 0; i < j["pictures"].size(); ++i) {
     const nlohmann::json& e = j["pictures"][i];
     const std::string at = cat("pictures[", i, "]");
@@ -70,7 +73,6 @@ inline std::vector<PanelPicture> parse_panel_list(std::string_view text, const s
     const std::string name = p.file.generic_string();
     if (p.file.is_absolute() || p.file.has_root_name() || name == ".." || name.rfind("../", 0) == 0)
       fail(file, at + ".file", cat("'", name.substr(0, 200), "' is not a path inside --images (give it relative to it)"));
-    if (!seen.insert(name).second) fail(file, at + ".file", cat("'", name.substr(0, 200), "' is listed twice"));
     const nlohmann::json* a = e.contains("area") ? &e["area"] : nullptr;
     bool ok = a && a->is_array() && a->size() == 4;
     for (std::size_t k = 0; ok && k < 4; ++k) {
@@ -82,6 +84,8 @@ inline std::vector<PanelPicture> parse_panel_list(std::string_view text, const s
     if (!ok) fail(file, at + ".area", "expected four [x, y] corners of the panel's reflecting area, in pixels");
     if (!convex_quad(p.area))
       fail(file, at + ".area", "the four corners do not go once around a convex area (list them in order around it)");
+    if (!seen.insert({name, p.area}).second)
+      fail(file, at + ".file", cat("'", name.substr(0, 200), "' is listed twice with the same area"));
     p.albedo = e.contains("albedo") ? std::optional<double>(albedo_of(e["albedo"], at + ".albedo")) : common;
     out.push_back(std::move(p));
   }
