@@ -464,10 +464,7 @@ msgs::io::PanelSchedule calibrate_with_panels(std::vector<Item>& panels, const s
   }
   // Panels of several reflectances: the empirical line's offset (0 where they do not give one).
   const msgs::io::PanelLine line = msgs::io::panel_line(responses);
-  const auto [lowest, highest] = std::minmax_element(
-      responses.begin(), responses.end(), [](const auto& a, const auto& b) { return a.albedo < b.albedo; });
-  const bool spans = highest->albedo >= msgs::io::kPanelLineAlbedoRatio * lowest->albedo;
-  if (line.problem.empty()) {
+  if (line.fitted()) {
     std::printf("  %s: panels of reflectance %.3g to %.3g in %zu session%s lie on a line with an offset of %.4g:"
                 " each image's reflectance is response / E %s %.4g\n",
                 band.c_str(), line.low_albedo, line.high_albedo, line.sessions, line.sessions == 1 ? "" : "s",
@@ -475,7 +472,7 @@ msgs::io::PanelSchedule calibrate_with_panels(std::vector<Item>& panels, const s
     line_report["offset"] = line.offset;
     line_report["sessions"] = line.sessions;
     line_report["albedo_range"] = {line.low_albedo, line.high_albedo};
-  } else if (spans) {  // panels of several reflectances that give no line: say why
+  } else if (!line.problem.empty()) {  // panels of several reflectances that give no line: say why
     std::printf("  warning: %s: no empirical line from the panels: %s; the line through zero is used\n", band.c_str(),
                 line.problem.c_str());
     line_report["problem"] = line.problem;

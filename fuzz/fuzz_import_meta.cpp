@@ -120,10 +120,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       responses.push_back({1e-3 + std::abs(std::fmod(p.area[0][0], 1e6)), p.albedo.value_or(0.5),
                            std::fmod(p.area[0][1], 1e5)});
     }
-    // The line's offset is finite and leaves every panel light, or there is none and a reason.
+    // The line's offset is finite and leaves every panel light, or there is none (offset 0).
     const io::PanelLine line = io::panel_line(responses);
-    bool bad = !std::isfinite(line.offset) || (line.problem.empty() && line.sessions == 0) ||
-               (!line.problem.empty() && line.offset != 0.0);
+    bool bad = !std::isfinite(line.offset) || (!line.fitted() && line.offset != 0.0);
     for (const io::PanelResponse& r : responses) bad = bad || !(r.albedo + line.offset > 0);
     if (bad || std::abs(line.offset) > io::kMaxPanelLineOffset) {
       std::fprintf(stderr, "panel_line: an offset that is not finite, leaves a panel no light, or lacks a reason\n");

@@ -530,7 +530,7 @@ TEST_CASE("panel_line: panels of several reflectances give the empirical line's 
         std::vector<std::size_t>{0, 0, 1, 1, 1, 2});
   CHECK(panel_sessions({9000.0, 1000.0, std::nullopt}) == std::vector<std::size_t>{0, 0, 0});
   const PanelLine line = panel_line(two);
-  CHECK_MESSAGE(line.problem.empty(), line.problem);
+  CHECK_MESSAGE(line.fitted(), line.problem);
   CHECK(line.offset == doctest::Approx(0.04).epsilon(1e-12));
   CHECK(line.sessions == 2);
   CHECK(line.low_albedo == 0.1);
@@ -543,21 +543,27 @@ TEST_CASE("panel_line: panels of several reflectances give the empirical line's 
   }
   // A negative offset (a black level set too high) is fitted as well.
   const PanelLine below = panel_line({{2.0 * (0.5 - 0.02), 0.5, 0.0}, {2.0 * (0.2 - 0.02), 0.2, 1.0}});
-  CHECK_MESSAGE(below.problem.empty(), below.problem);
+  CHECK_MESSAGE(below.fitted(), below.problem);
   CHECK(below.offset == doctest::Approx(-0.02).epsilon(1e-12));
 }
 
 TEST_CASE("panel_line: what gives no line says why, and leaves the line through zero") {
-  // One reflectance, or reflectances too close to tell an offset from the light.
-  PanelLine l = panel_line({{1.0, 0.5, 0.0}, {1.1, 0.5, 5.0}});
-  CHECK(l.offset == 0.0);
-  CHECK(l.problem.find("no session holds panels whose reflectances lie 2 times apart") != std::string::npos);
-  CHECK(!panel_line({{1.0, 0.5, 0.0}, {0.8, 0.3, 5.0}}).problem.empty());
-  CHECK(!panel_line({}).problem.empty());
+  // One reflectance, or reflectances too close to tell an offset from the light: no line, and
+  // nothing wrong.
+  for (const std::vector<PanelResponse>& none :
+       {std::vector<PanelResponse>{{1.0, 0.5, 0.0}, {1.1, 0.5, 5.0}}, {{1.0, 0.5, 0.0}, {0.8, 0.3, 5.0}}, {}}) {
+    const PanelLine n = panel_line(none);
+    CHECK(n.offset == 0.0);
+    CHECK(n.sessions == 0);
+    CHECK(!n.fitted());
+    CHECK(n.problem.empty());
+  }
   // A dark panel before the flight and a grey one after it: two sessions of one reflectance each.
-  l = panel_line({{0.2, 0.1, 0.0}, {1.0, 0.5, 1000.0}});
+  PanelLine l = panel_line({{0.2, 0.1, 0.0}, {1.0, 0.5, 1000.0}});
   CHECK(l.offset == 0.0);
-  CHECK(l.problem.find("no session holds") != std::string::npos);
+  CHECK(!l.fitted());
+  CHECK(l.problem.find("no session holds panels whose reflectances lie 2 times apart (panels photographed more than"
+                       " 120 s apart do not make one line)") != std::string::npos);
   // The brighter panel reading darker: areas or reflectances swapped.
   l = panel_line({{0.2, 0.5, 0.0}, {1.0, 0.1, 1.0}});
   CHECK(l.offset == 0.0);

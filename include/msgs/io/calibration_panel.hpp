@@ -180,13 +180,17 @@ struct PanelLine {
   double offset = 0.0;
   std::size_t sessions = 0;     ///< the sessions whose panels of several reflectances gave it
   double low_albedo = 0.0, high_albedo = 0.0;  ///< the reflectances they spanned
-  std::string problem;          ///< why no offset was fitted (empty when it was)
+  /// Why panels of several reflectances gave no line (empty when one was fitted, or when the
+  /// reflectances do not lie kPanelLineAlbedoRatio apart at all and no line was to be had)
+  std::string problem;
+  bool fitted() const { return sessions > 0 && problem.empty(); }
 };
 
 /// Fit the offset of `pictures` (responses > 0, albedos in (0, 1]): in each session (panel_sessions)
 /// whose reflectances span kPanelLineAlbedoRatio, the least-squares line response = a rho + b gives
-/// offset b / a; the offset is their mean, weighted by the pictures. A problem, offset 0 (the line
-/// through zero), where no session spans the ratio; a line that falls with the reflectance, an
+/// offset b / a; the offset is their mean, weighted by the pictures. Offset 0 (the line through
+/// zero) where no session spans the ratio, with a problem where the pictures as a whole do (the
+/// panels were photographed at different times); a line that falls with the reflectance, an
 /// offset beyond kMaxPanelLineOffset or one that would leave a panel's albedo + offset not
 /// positive is a problem too.
 inline PanelLine panel_line(const std::vector<PanelResponse>& pictures) {
@@ -228,8 +232,12 @@ inline PanelLine panel_line(const std::vector<PanelResponse>& pictures) {
     high = std::max(high, hi);
   }
   if (line.sessions == 0) {
-    line.problem = cat("no session holds panels whose reflectances lie ", short_number(kPanelLineAlbedoRatio),
-                       " times apart");
+    const auto [lowest, highest] = std::minmax_element(
+        pictures.begin(), pictures.end(), [](const PanelResponse& a, const PanelResponse& b) { return a.albedo < b.albedo; });
+    if (!pictures.empty() && highest->albedo >= kPanelLineAlbedoRatio * lowest->albedo)
+      line.problem = cat("no session holds panels whose reflectances lie ", short_number(kPanelLineAlbedoRatio),
+                         " times apart (panels photographed more than ", short_number(kPanelSessionGap),
+                         " s apart do not make one line)");
     return line;
   }
   line.offset = weighted / weight;
