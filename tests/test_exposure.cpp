@@ -7,6 +7,7 @@
 #include <doctest/doctest.h>
 
 #include "fixtures.hpp"
+#include "shared_trainers.hpp"  // Trainer<G>, compiled once for the tests that drive it
 #include "../examples/report.hpp"  // result.json / metrics.md of `msgs train`
 
 #include <msgs/checkpoint.hpp>

@@ -5,6 +5,7 @@
 #include <doctest/doctest.h>
 
 #include "fixtures.hpp"
+#include "shared_trainers.hpp"  // Trainer<G>, compiled once for the tests that drive it
 
 #include <msgs/run.hpp>
 #include <msgs/synth.hpp>

@@ -405,151 +405,7 @@ class Trainer {
   }
 
   /// Train steps [begin, end). Returns the first step not taken (end, or earlier when stopped).
-  long long train(long long begin, long long end) {
-    using clock = std::chrono::steady_clock;
-    const auto t_start = clock::now();
-    Rasterizer<G, float, kTrainRaster> raster;
-    Gradients<G, float> grads;
-    Image<float> d_image;
-    Image<float> corrected;  // exposure: g * render + b, what the loss sees
-    Image<float> clamped;    // clamp_render: the render in [0, 1]
-    SsimWorkspace<float> ws;
-    double loss_sum = 0;
-    long long loss_n = 0;
-    DensifyReport last_rep;
-    long long step = begin;
-    auto mark = clock::now();  // the training clock runs from here, paused for anytime evaluations
-    auto tick = [&] {
-      const auto now = clock::now();
-      clock_ += seconds(mark, now);
-      mark = now;
-    };
-    for (; step < end; ++step) {
-      if (opt_.stop && opt_.stop->load()) break;
-      if (opt_.curve.enabled()) {
-        tick();
-        if (curve_due(step)) {
-          record_curve(step);
-          mark = clock::now();
-        }
-      }
-      if (!opt_.checkpoint_path.empty() && opt_.checkpoint_every > 0 && step > begin && step % opt_.checkpoint_every == 0)
-        checkpoint(step, tick);
-      if (opt_.spectral_colour_init && step == plan_.spectral_start && plan_.spectral_start > 0) init_spectral_colours(step);
-      auto t0 = clock::now();
-      // 1. Which band and image.
-      const auto [bi, frame] = sample(step);
-      const TrainBand& band = bands_[std::size_t(bi)];
-      const int factor = plan_.schedule.downscale(step);
-      const Image<float>& gt = images_.get(frame, factor);
-      const Camera<float> cam = images_.camera(frame, factor);
-      auto t1 = clock::now();
-      times_.load += seconds(t0, t1);
-
-      // 2. Render only this band's channels.
-      RenderSettings<float> rs;
-      rs.band_first = band.first_channel;
-      rs.band_count = band.channels;
-      rs.sh_degree = plan_.schedule.sh_degree(step, G::sh_degree);
-      rs.background = opt_.random_background ? random_background<float>(step, band.channels, opt_.seed)
-                                             : std::vector<float>(std::size_t(band.channels), 0.0f);
-      raster.timings().reset();
-      const Image<float>& raw = raster.forward(model_, cam, rs);
-      auto t2 = clock::now();
-
-      // 3. Loss and its gradient (of the clamped render, then exposure-corrected when exposure is on).
-      if (opt_.clamp_render) clamp01(raw, clamped);
-      const Image<float>& render = opt_.clamp_render ? clamped : raw;
-      if (opt_.exposure) exposure_.forward(frame, render, corrected);
-      const Image<float>& seen_image = opt_.exposure ? corrected : render;
-      double mse = 0;
-      const double loss = photometric_loss(seen_image, gt, &d_image, ws, opt_.loss, &mse);
-      loss_sum += loss;
-      ++loss_n;
-      const double p = psnr_from_mse(mse);
-      double& bp = band_psnr_[std::size_t(bi)];
-      bp = std::isnan(bp) ? p : 0.9 * bp + 0.1 * p;
-      auto t3 = clock::now();
-
-      // 4. Backward: through the exposure correction (its Adam step on this image's parameters
-      // only, taken here since nothing else reads them), then the rasteriser.
-      if (opt_.exposure) exposure_.backward_and_step(frame, render, d_image);
-      if (opt_.clamp_render) clamp01_backward(raw, d_image);
-      // Gradient rows the view did not see: sparse Adam never reads them; dense Adam takes them as
-      // zero without reading them (Unlisted::zero_gradient), except at a step of the scale
-      // regulariser, which gives every Gaussian a gradient: then they are written, zeros included.
-      const std::vector<std::uint32_t>& seen = raster.visible();
-      const bool reg_step = opt_.scale_reg_every > 0 && step % opt_.scale_reg_every == 0;
-      const bool seen_only = opt_.sparse || !reg_step;
-      const std::vector<std::uint32_t>* rows = seen_only ? &seen : nullptr;
-      const Unlisted unlisted = opt_.sparse ? Unlisted::untouched : Unlisted::zero_gradient;
-      // The strategy's masks (they depend on the step and band only).
-      StepContext ctx;
-      ctx.step = step;
-      ctx.band = bi;
-      ctx.spectral = band.spectral;
-      ctx.mask = AdamMask::band(band.first_channel, band.channels);
-      hooks_.pre_backward(plan_, ctx);
-      // Adam's colour update of the visible Gaussians inside the backward (fused_colour).
-      const bool fuse = opt_.fused_colour && !opt_.check_finite && ctx.mask.sh;
-      std::optional<typename Adam<G, float>::ColourStep> colour;
-      if (fuse) colour.emplace(adam_.begin_colour(model_, ctx.mask.sh_first, ctx.mask.sh_channels(G::bands)));
-      raster.backward(d_image, nullptr, nullptr, grads, seen_only ? GradientFill::visible : GradientFill::dense,
-                      fuse ? &*colour : nullptr);
-      if (opt_.check_finite) check_finite_gradients(step, grads, rows);
-      if (reg_step)
-        scale_reg<float>(std::span<const float>(model_.log_scales), std::span<float>(grads.model.log_scales),
-                         opt_.scale_reg, rows);
-      auto t4 = clock::now();
-      times_.project += raster.timings().project;
-      times_.bin += raster.timings().bin;
-      times_.blend += raster.timings().blend;
-      times_.loss += seconds(t2, t3);
-      times_.backward += seconds(t3, t4);
-      times_.backward_blend += raster.timings().blend_backward;
-      times_.backward_gaussians += raster.timings().project_backward;
-
-      // 5. Adam with the strategy's masks (the colour of the visible Gaussians already, when fused).
-      AdamMask mask = ctx.mask;
-      if (fuse) mask.sh = false;
-      adam_.step(model_, grads.model, mask, rows, unlisted);
-      if (fuse) adam_.finish_colour(*colour, seen, unlisted);
-      auto t5 = clock::now();
-      times_.adam += seconds(t4, t5);
-
-      // 6. Adaptive density control.
-      if (ctx.observe_density && density_.accumulates_at(step))
-        density_.observe_gradients(step, bi, grads, raster.radii(), cam.width, cam.height, &seen);
-      const auto t5s = clock::now();
-      const DensifyReport rep = density_.step_post_backward(step, model_, adam_.exp_avg, adam_.exp_avg_sq);
-      if (rep.refined || rep.opacity_reset) last_rep = rep;
-      auto t6 = clock::now();
-      times_.densify += seconds(t5, t6);
-      if (rep.refined) times_.refine += seconds(t5s, t6);
-
-      if (opt_.check_finite) check_finite(step);
-      if (opt_.on_step) {  // off the training clock, like anytime evaluations
-        tick();
-        opt_.on_step(StepView::of(model_, bands_, step + 1, begin, end));
-        mark = clock::now();
-      }
-      if (opt_.on_progress && ((step + 1 - begin) % std::max(1, opt_.progress_every) == 0 || step + 1 == end)) {
-        TrainProgress pr;
-        pr.step = step + 1; pr.begin = begin; pr.end = end;
-        pr.loss = loss_sum / double(std::max<long long>(loss_n, 1));
-        loss_sum = 0; loss_n = 0;
-        pr.band_psnr = band_psnr_;
-        for (const auto& b : bands_) pr.band_ids.push_back(b.id);
-        pr.gaussians = model_.size();
-        pr.seconds = seconds(t_start, clock::now());
-        pr.last_refine = last_rep;
-        opt_.on_progress(pr);
-      }
-    }
-    tick();
-    if (!opt_.checkpoint_path.empty()) checkpoint(step, tick);
-    return step;
-  }
+  long long train(long long begin, long long end);
 
   /// With the anytime evaluation on: a point at `step` now (the model's last step, say), unless the
   /// curve already ends there. Its time is off the training clock.
@@ -561,31 +417,7 @@ class Trainer {
   /// background (REFERENCE §3) and renders clamped to [0, 1]. Rendered without any exposure
   /// correction (eval images have no learned one); with exposure on, also the colour-corrected
   /// PSNR / SSIM (least-squares affine per image and channel, BandMetrics::psnr_cc).
-  std::vector<BandMetrics> evaluate(bool eval_split = true) {
-    const auto t0 = std::chrono::steady_clock::now();
-    std::vector<BandMetrics> out;
-    Rasterizer<G, float, kTrainRaster> raster;
-    ImageCache full(*ds_);
-    for (const auto& band : bands_) {
-      BandMetrics m;
-      m.band = band.id;
-      const auto& frames = eval_split ? band.eval_frames : band.train_frames;
-      for (std::size_t f : frames) {
-        const Image<float> render = eval_render(raster, full, band, f);
-        const Image<float>& gt = full.get(f, 1);
-        m.psnr.push_back(psnr(render, gt));
-        m.ssim.push_back(ssim(render, gt, opt_.eval_ssim));
-        if (opt_.exposure) {
-          const Image<float> cc = colour_correct(render, gt);
-          m.psnr_cc.push_back(psnr(cc, gt));
-          m.ssim_cc.push_back(ssim(cc, gt, opt_.eval_ssim));
-        }
-      }
-      out.push_back(std::move(m));
-    }
-    times_.eval += seconds(t0, std::chrono::steady_clock::now());
-    return out;
-  }
+  std::vector<BandMetrics> evaluate(bool eval_split = true);
 
  private:
   static double seconds(std::chrono::steady_clock::time_point a, std::chrono::steady_clock::time_point b) {
@@ -631,31 +463,7 @@ class Trainer {
 
   /// Evaluate the fixed subset of every band's eval images (curve_subset) at full resolution, as
   /// evaluate() does, and append the point. The caller keeps its time off the training clock.
-  void record_curve(long long step) {
-    const auto t0 = std::chrono::steady_clock::now();
-    CurvePoint p;
-    p.seconds = opt_.clock_offset + clock_;
-    p.step = step;
-    p.gaussians = model_.size();
-    Rasterizer<G, float, kTrainRaster> raster;
-    for (const auto& band : bands_) {
-      p.bands.push_back(band.id);
-      double sp = 0, ss = 0;
-      const std::vector<std::size_t> pick = curve_subset(band.eval_frames.size(), opt_.curve.images);
-      for (std::size_t k : pick) {
-        const std::size_t f = band.eval_frames[k];
-        const Image<float> render = eval_render(raster, curve_images_, band, f);
-        const Image<float>& gt = curve_images_.get(f, 1);
-        sp += psnr(render, gt);
-        ss += ssim(render, gt, opt_.eval_ssim);
-      }
-      const double n = double(pick.size());
-      p.psnr.push_back(pick.empty() ? std::nan("") : sp / n);
-      p.ssim.push_back(pick.empty() ? std::nan("") : ss / n);
-    }
-    curve_.push_back(std::move(p));
-    times_.eval += seconds(t0, std::chrono::steady_clock::now());
-  }
+  void record_curve(long long step);
 
   /// TrainOptions::spectral_colour_init at `step`: every narrow band's colour starts from the
   /// geometry band's (spectral_colour_from).
@@ -755,5 +563,209 @@ class Trainer {
   std::vector<double> band_psnr_;
   std::map<std::uint32_t, std::pair<BandSampler, std::vector<int>>> samplers_;
 };
+
+// The training loop, the evaluation and the anytime evaluation are defined out of the class, so not
+// inline: a translation unit that declares `extern template class Trainer<G>;` leaves them, the
+// costliest code of a trainer to compile, to the one unit that instantiates Trainer<G>.
+template <class G>
+long long Trainer<G>::train(long long begin, long long end) {
+  using clock = std::chrono::steady_clock;
+  const auto t_start = clock::now();
+  Rasterizer<G, float, kTrainRaster> raster;
+  Gradients<G, float> grads;
+  Image<float> d_image;
+  Image<float> corrected;  // exposure: g * render + b, what the loss sees
+  Image<float> clamped;    // clamp_render: the render in [0, 1]
+  SsimWorkspace<float> ws;
+  double loss_sum = 0;
+  long long loss_n = 0;
+  DensifyReport last_rep;
+  long long step = begin;
+  auto mark = clock::now();  // the training clock runs from here, paused for anytime evaluations
+  auto tick = [&] {
+    const auto now = clock::now();
+    clock_ += seconds(mark, now);
+    mark = now;
+  };
+  for (; step < end; ++step) {
+    if (opt_.stop && opt_.stop->load()) break;
+    if (opt_.curve.enabled()) {
+      tick();
+      if (curve_due(step)) {
+        record_curve(step);
+        mark = clock::now();
+      }
+    }
+    if (!opt_.checkpoint_path.empty() && opt_.checkpoint_every > 0 && step > begin && step % opt_.checkpoint_every == 0)
+      checkpoint(step, tick);
+    if (opt_.spectral_colour_init && step == plan_.spectral_start && plan_.spectral_start > 0) init_spectral_colours(step);
+    auto t0 = clock::now();
+    // 1. Which band and image.
+    const auto [bi, frame] = sample(step);
+    const TrainBand& band = bands_[std::size_t(bi)];
+    const int factor = plan_.schedule.downscale(step);
+    const Image<float>& gt = images_.get(frame, factor);
+    const Camera<float> cam = images_.camera(frame, factor);
+    auto t1 = clock::now();
+    times_.load += seconds(t0, t1);
+
+    // 2. Render only this band's channels.
+    RenderSettings<float> rs;
+    rs.band_first = band.first_channel;
+    rs.band_count = band.channels;
+    rs.sh_degree = plan_.schedule.sh_degree(step, G::sh_degree);
+    rs.background = opt_.random_background ? random_background<float>(step, band.channels, opt_.seed)
+                                           : std::vector<float>(std::size_t(band.channels), 0.0f);
+    raster.timings().reset();
+    const Image<float>& raw = raster.forward(model_, cam, rs);
+    auto t2 = clock::now();
+
+    // 3. Loss and its gradient (of the clamped render, then exposure-corrected when exposure is on).
+    if (opt_.clamp_render) clamp01(raw, clamped);
+    const Image<float>& render = opt_.clamp_render ? clamped : raw;
+    if (opt_.exposure) exposure_.forward(frame, render, corrected);
+    const Image<float>& seen_image = opt_.exposure ? corrected : render;
+    double mse = 0;
+    const double loss = photometric_loss(seen_image, gt, &d_image, ws, opt_.loss, &mse);
+    loss_sum += loss;
+    ++loss_n;
+    const double p = psnr_from_mse(mse);
+    double& bp = band_psnr_[std::size_t(bi)];
+    bp = std::isnan(bp) ? p : 0.9 * bp + 0.1 * p;
+    auto t3 = clock::now();
+
+    // 4. Backward: through the exposure correction (its Adam step on this image's parameters
+    // only, taken here since nothing else reads them), then the rasteriser.
+    if (opt_.exposure) exposure_.backward_and_step(frame, render, d_image);
+    if (opt_.clamp_render) clamp01_backward(raw, d_image);
+    // Gradient rows the view did not see: sparse Adam never reads them; dense Adam takes them as
+    // zero without reading them (Unlisted::zero_gradient), except at a step of the scale
+    // regulariser, which gives every Gaussian a gradient: then they are written, zeros included.
+    const std::vector<std::uint32_t>& seen = raster.visible();
+    const bool reg_step = opt_.scale_reg_every > 0 && step % opt_.scale_reg_every == 0;
+    const bool seen_only = opt_.sparse || !reg_step;
+    const std::vector<std::uint32_t>* rows = seen_only ? &seen : nullptr;
+    const Unlisted unlisted = opt_.sparse ? Unlisted::untouched : Unlisted::zero_gradient;
+    // The strategy's masks (they depend on the step and band only).
+    StepContext ctx;
+    ctx.step = step;
+    ctx.band = bi;
+    ctx.spectral = band.spectral;
+    ctx.mask = AdamMask::band(band.first_channel, band.channels);
+    hooks_.pre_backward(plan_, ctx);
+    // Adam's colour update of the visible Gaussians inside the backward (fused_colour).
+    const bool fuse = opt_.fused_colour && !opt_.check_finite && ctx.mask.sh;
+    std::optional<typename Adam<G, float>::ColourStep> colour;
+    if (fuse) colour.emplace(adam_.begin_colour(model_, ctx.mask.sh_first, ctx.mask.sh_channels(G::bands)));
+    raster.backward(d_image, nullptr, nullptr, grads, seen_only ? GradientFill::visible : GradientFill::dense,
+                    fuse ? &*colour : nullptr);
+    if (opt_.check_finite) check_finite_gradients(step, grads, rows);
+    if (reg_step)
+      scale_reg<float>(std::span<const float>(model_.log_scales), std::span<float>(grads.model.log_scales),
+                       opt_.scale_reg, rows);
+    auto t4 = clock::now();
+    times_.project += raster.timings().project;
+    times_.bin += raster.timings().bin;
+    times_.blend += raster.timings().blend;
+    times_.loss += seconds(t2, t3);
+    times_.backward += seconds(t3, t4);
+    times_.backward_blend += raster.timings().blend_backward;
+    times_.backward_gaussians += raster.timings().project_backward;
+
+    // 5. Adam with the strategy's masks (the colour of the visible Gaussians already, when fused).
+    AdamMask mask = ctx.mask;
+    if (fuse) mask.sh = false;
+    adam_.step(model_, grads.model, mask, rows, unlisted);
+    if (fuse) adam_.finish_colour(*colour, seen, unlisted);
+    auto t5 = clock::now();
+    times_.adam += seconds(t4, t5);
+
+    // 6. Adaptive density control.
+    if (ctx.observe_density && density_.accumulates_at(step))
+      density_.observe_gradients(step, bi, grads, raster.radii(), cam.width, cam.height, &seen);
+    const auto t5s = clock::now();
+    const DensifyReport rep = density_.step_post_backward(step, model_, adam_.exp_avg, adam_.exp_avg_sq);
+    if (rep.refined || rep.opacity_reset) last_rep = rep;
+    auto t6 = clock::now();
+    times_.densify += seconds(t5, t6);
+    if (rep.refined) times_.refine += seconds(t5s, t6);
+
+    if (opt_.check_finite) check_finite(step);
+    if (opt_.on_step) {  // off the training clock, like anytime evaluations
+      tick();
+      opt_.on_step(StepView::of(model_, bands_, step + 1, begin, end));
+      mark = clock::now();
+    }
+    if (opt_.on_progress && ((step + 1 - begin) % std::max(1, opt_.progress_every) == 0 || step + 1 == end)) {
+      TrainProgress pr;
+      pr.step = step + 1; pr.begin = begin; pr.end = end;
+      pr.loss = loss_sum / double(std::max<long long>(loss_n, 1));
+      loss_sum = 0; loss_n = 0;
+      pr.band_psnr = band_psnr_;
+      for (const auto& b : bands_) pr.band_ids.push_back(b.id);
+      pr.gaussians = model_.size();
+      pr.seconds = seconds(t_start, clock::now());
+      pr.last_refine = last_rep;
+      opt_.on_progress(pr);
+    }
+  }
+  tick();
+  if (!opt_.checkpoint_path.empty()) checkpoint(step, tick);
+  return step;
+}
+
+template <class G>
+std::vector<BandMetrics> Trainer<G>::evaluate(bool eval_split) {
+  const auto t0 = std::chrono::steady_clock::now();
+  std::vector<BandMetrics> out;
+  Rasterizer<G, float, kTrainRaster> raster;
+  ImageCache full(*ds_);
+  for (const auto& band : bands_) {
+    BandMetrics m;
+    m.band = band.id;
+    const auto& frames = eval_split ? band.eval_frames : band.train_frames;
+    for (std::size_t f : frames) {
+      const Image<float> render = eval_render(raster, full, band, f);
+      const Image<float>& gt = full.get(f, 1);
+      m.psnr.push_back(psnr(render, gt));
+      m.ssim.push_back(ssim(render, gt, opt_.eval_ssim));
+      if (opt_.exposure) {
+        const Image<float> cc = colour_correct(render, gt);
+        m.psnr_cc.push_back(psnr(cc, gt));
+        m.ssim_cc.push_back(ssim(cc, gt, opt_.eval_ssim));
+      }
+    }
+    out.push_back(std::move(m));
+  }
+  times_.eval += seconds(t0, std::chrono::steady_clock::now());
+  return out;
+}
+
+template <class G>
+void Trainer<G>::record_curve(long long step) {
+  const auto t0 = std::chrono::steady_clock::now();
+  CurvePoint p;
+  p.seconds = opt_.clock_offset + clock_;
+  p.step = step;
+  p.gaussians = model_.size();
+  Rasterizer<G, float, kTrainRaster> raster;
+  for (const auto& band : bands_) {
+    p.bands.push_back(band.id);
+    double sp = 0, ss = 0;
+    const std::vector<std::size_t> pick = curve_subset(band.eval_frames.size(), opt_.curve.images);
+    for (std::size_t k : pick) {
+      const std::size_t f = band.eval_frames[k];
+      const Image<float> render = eval_render(raster, curve_images_, band, f);
+      const Image<float>& gt = curve_images_.get(f, 1);
+      sp += psnr(render, gt);
+      ss += ssim(render, gt, opt_.eval_ssim);
+    }
+    const double n = double(pick.size());
+    p.psnr.push_back(pick.empty() ? std::nan("") : sp / n);
+    p.ssim.push_back(pick.empty() ? std::nan("") : ss / n);
+  }
+  curve_.push_back(std::move(p));
+  times_.eval += seconds(t0, std::chrono::steady_clock::now());
+}
 
 }  // namespace msgs
