@@ -53,7 +53,7 @@ constexpr const char* kUsage =
     "                   [--bands PATTERN=ID,...] [--eval-every N] [--camera-model M]\n"
     "                   [--radiometry auto|none|reflectance|sun-sensor|panel|panel+dls]\n"
     "                   [--panel-albedo A]\n"
-    "                   [--panels FILE]\n"
+    "                   [--panels FILE] [--panel-offset fit|zero]\n"
     "                   [--matching exhaustive|window|gps]\n"
     "                   [--window N] [--neighbours K] [--sift-threshold T] [--ba-tolerance X]\n"
     "                   [--merge-models on|off] [--rig on|off] [--allow-partial] [--downscales N]\n"
@@ -143,6 +143,9 @@ constexpr const char* kUsage =
     "                      it shows: panels of reflectances 2 times apart or more in one session\n"
     "                      give an empirical line, response = E (albedo + offset), whose offset\n"
     "                      (haze, a black level a little off) every image then loses\n"
+    "  --panel-offset O    fit (default): the empirical line's offset where the panels give one;\n"
+    "                      zero: the line through zero all the same (a black level and an air\n"
+    "                      you trust over the panels); the offset they would give is logged\n"
     "  --matching M        image pairs COLMAP matches: exhaustive (default: every pair; the time\n"
     "                      grows with the square of the image count), window (the bands of a\n"
     "                      capture with each other, and each band with the same band of the next\n"
@@ -429,11 +432,13 @@ std::vector<std::size_t> usable_panels(const std::vector<Item>& panels, const st
 /// The irradiance of `band` through the flight from its panel pictures `use`
 /// (msgs/io/calibration_panel.hpp), in the sensor's units: an image's scale is 1 / its value at
 /// the image's time, less the empirical line's offset where panels of several reflectances give
-/// one. Each picture is logged and appended to `report`, the line to `line_report`.
+/// one and `fit_offset` (--panel-offset fit) lets it. Each picture is logged and appended to
+/// `report`, the line to `line_report`.
 msgs::io::PanelSchedule calibrate_with_panels(std::vector<Item>& panels, const std::vector<std::size_t>& use,
                                               const std::string& band, const msgs::io::RadiometrySteps& steps,
-                                              const std::map<std::string, double>& albedo_arg, const fs::path& images,
-                                              nlohmann::ordered_json& report, nlohmann::ordered_json& line_report) {
+                                              const std::map<std::string, double>& albedo_arg, bool fit_offset,
+                                              const fs::path& images, nlohmann::ordered_json& report,
+                                              nlohmann::ordered_json& line_report) {
   struct Picture {
     double albedo = 0.0;
     std::string albedo_from;
@@ -462,9 +467,21 @@ msgs::io::PanelSchedule calibrate_with_panels(std::vector<Item>& panels, const s
     responses.push_back({pic.reading.mean, pic.albedo, p.meta.time_s});
     pictures.push_back(pic);
   }
-  // Panels of several reflectances: the empirical line's offset (0 where they do not give one).
-  const msgs::io::PanelLine line = msgs::io::panel_line(responses);
-  if (line.fitted()) {
+  // Panels of several reflectances: the empirical line's offset (0 where they do not give one, or
+  // where --panel-offset zero keeps the line through zero).
+  msgs::io::PanelLine line = msgs::io::panel_line(responses);
+  const bool forced_through_zero = line.fitted() && !fit_offset;
+  if (forced_through_zero) {
+    std::printf("  %s: panels of reflectance %.3g to %.3g in %zu session%s would give an offset of %.4g;"
+                " --panel-offset zero keeps the line through zero\n",
+                band.c_str(), line.low_albedo, line.high_albedo, line.sessions, line.sessions == 1 ? "" : "s",
+                line.offset);
+    line_report["offset"] = 0.0;
+    line_report["fitted_offset_not_used"] = line.offset;
+    line_report["sessions"] = line.sessions;
+    line_report["albedo_range"] = {line.low_albedo, line.high_albedo};
+    line.offset = 0.0;
+  } else if (line.fitted()) {
     std::printf("  %s: panels of reflectance %.3g to %.3g in %zu session%s lie on a line with an offset of %.4g:"
                 " each image's reflectance is response / E %s %.4g\n",
                 band.c_str(), line.low_albedo, line.high_albedo, line.sessions, line.sessions == 1 ? "" : "s",
@@ -523,7 +540,8 @@ msgs::io::PanelSchedule calibrate_with_panels(std::vector<Item>& panels, const s
     if (hi[k] > 1.05 * lo[k])
       std::printf("  warning: %s: %s panel pictures disagree by %.3g%% (%s); their mean is used\n", band.c_str(),
                   schedule.timed() ? "one session's" : cat("the ", use.size()).c_str(), 100.0 * (hi[k] / lo[k] - 1.0),
-                  steps.irradiance ? "after the light sensor's readings: a shaded or tilted panel?"
+                  forced_through_zero ? "the offset of their line, which --panel-offset zero leaves in?"
+                  : steps.irradiance  ? "after the light sensor's readings: a shaded or tilted panel?"
                   : schedule.timed()
                       ? "the light changed between them? --radiometry panel+dls follows it with the light sensor"
                       : "the light changed between them? Pictures before and after the flight (more than 2 minutes"
@@ -943,7 +961,7 @@ int run_import(const std::vector<std::string>& argv) {
   const msgs::cli::Args args(argv,
                              {"images", "out", "camera", "bands", "eval-every", "camera-model", "radiometry", "panel-albedo", "panels", "matching",
                               "window", "neighbours", "sift-threshold", "ba-tolerance", "merge-models", "rig", "colmap", "exiv2",
-                              "downscales", "light-sensor-heading"},
+                              "downscales", "light-sensor-heading", "panel-offset"},
                              {"force", "allow-partial", "keep-work", "help"});
   if (args.flag("help")) {
     std::fputs(kUsage, stdout);
@@ -990,6 +1008,12 @@ int run_import(const std::vector<std::string>& argv) {
   const std::map<std::string, double> panel_albedo = parse_panel_albedo(args.get("panel-albedo", ""));
   if (!panel_albedo.empty() && !by_panel)
     throw msgs::cli::UsageError("--panel-albedo goes with --radiometry panel or panel+dls");
+  const std::string panel_offset = args.get("panel-offset", "fit");
+  if (panel_offset != "fit" && panel_offset != "zero")
+    throw msgs::cli::UsageError("--panel-offset expects fit or zero, got '" + panel_offset + "'");
+  if (args.has("panel-offset") && !by_panel)
+    throw msgs::cli::UsageError("--panel-offset goes with --radiometry panel or panel+dls");
+  const bool fit_panel_offset = panel_offset == "fit";
   const long downscales = args.integer("downscales", 0);
   if (downscales < 0 || downscales > 4) throw msgs::cli::UsageError("--downscales expects 0 to 4");
   const std::string heading_mode = args.get("light-sensor-heading", "report");
@@ -1296,7 +1320,8 @@ int run_import(const std::vector<std::string>& argv) {
     }
     nlohmann::ordered_json line_report = nlohmann::ordered_json::object();
     const msgs::io::PanelSchedule schedule =
-        by_panel ? calibrate_with_panels(panels, band_panels, band, steps, panel_albedo, images, panel_report, line_report)
+        by_panel ? calibrate_with_panels(panels, band_panels, band, steps, panel_albedo, fit_panel_offset, images,
+                                         panel_report, line_report)
                  : msgs::io::PanelSchedule{};
     if (!line_report.empty()) panel_lines[band] = line_report;
     if (schedule.timed()) {

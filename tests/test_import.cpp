@@ -758,6 +758,21 @@ TEST_CASE("msgs import --radiometry panel: a grey and a dark panel give an empir
                                " of 0.0") != std::string::npos,
                 ok.second);
   check_panel_line(dir, opt, ok.second);
+  // --panel-offset zero keeps the line through zero: the offset the panels would give is logged,
+  // and the two panels then disagree (the run ends before COLMAP, once the radiometry is logged).
+  const auto zero = import_raw(dir, "ds_zero", "--colmap false --radiometry panel --panel-offset zero");
+  CHECK(zero.first == 1);
+  CHECK_MESSAGE(zero.second.find("MS_NIR: panels of reflectance 0.108 to 0.526 in 1 session would give an offset of"
+                                 " 0.0") != std::string::npos,
+                zero.second);
+  CHECK_MESSAGE(zero.second.find("panel pictures disagree by 33") != std::string::npos, zero.second);
+  CHECK_MESSAGE(zero.second.find("(the offset of their line, which --panel-offset zero leaves in?)") != std::string::npos,
+                zero.second);
+  CHECK(zero.second.find("lie on a line") == std::string::npos);
+  const auto wrong = import_raw(dir, "ds_wrong", "--colmap false --radiometry reflectance --panel-offset zero");
+  CHECK(wrong.first == 2);
+  CHECK_MESSAGE(wrong.second.find("--panel-offset goes with --radiometry panel or panel+dls") != std::string::npos,
+                wrong.second);
 }
 
 TEST_CASE("msgs import --radiometry panel: a dark tarp beside the panel, listed as a second area of the same picture") {
