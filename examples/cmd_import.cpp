@@ -130,14 +130,15 @@ constexpr const char* kUsage =
     "                      band ratios and indices as from reflectance, the level unknown)\n"
     "  --panel-albedo A    the panel's reflectance, for every band (0.49) or per band\n"
     "                      (MS_G=0.49,MS_R=0.5,...): where Camera:Albedo is missing, or to\n"
-    "                      override it with the panel's calibration sheet\n"
+    "                      override it with the panel's calibration sheet; not where --panels\n"
+    "                      gives a picture its reflectance\n"
     "  --panels FILE       the panel pictures of a camera that does not mark them (DJI, Parrot,\n"
     "                      or a MicaSense that could not read the panel), as JSON:\n"
     "                        {\"albedo\": 0.49, \"pictures\": [{\"file\": \"DJI_0021_MS_G.TIF\",\n"
     "                          \"area\": [[412, 300], [380, 301], [381, 333], [413, 332]]}, ...]}\n"
     "                      file relative to --images; area the corners of the panel's reflecting\n"
     "                      part in that image, x and y in pixels, in order around it; albedo per\n"
-    "                      picture or for all (else Camera:Albedo or --panel-albedo). Their\n"
+    "                      picture or for all (else --panel-albedo or Camera:Albedo). Their\n"
     "                      captures are set aside in every mode; with panel and panel+dls each\n"
     "                      listed picture calibrates its band. List a picture once for each panel\n"
     "                      it shows: panels of reflectances 2 times apart or more in one session\n"
@@ -446,13 +447,18 @@ msgs::io::PanelSchedule calibrate_with_panels(std::vector<Item>& panels, const s
   };
   std::vector<Picture> pictures;
   std::vector<msgs::io::PanelResponse> responses;
+  std::set<double> replaced;  // the pictures' own Camera:Albedo that --panel-albedo replaced
   for (std::size_t k : use) {
     Item& p = panels[k];
     const fs::path src = images / p.source;
     Picture pic;
-    if (const auto a = albedo_arg.count(band) ? albedo_arg.find(band) : albedo_arg.find(""); a != albedo_arg.end()) {
+    // A reflectance --panels gives this picture, else --panel-albedo's for the band, else the camera's.
+    const bool listed = p.meta.panel_albedo && p.meta.source.at("panel_albedo") == "--panels";
+    if (const auto a = albedo_arg.count(band) ? albedo_arg.find(band) : albedo_arg.find("");
+        !listed && a != albedo_arg.end()) {
       pic.albedo = a->second;
       pic.albedo_from = "--panel-albedo";
+      if (p.meta.panel_albedo) replaced.insert(*p.meta.panel_albedo);
     } else if (p.meta.panel_albedo) {
       pic.albedo = *p.meta.panel_albedo;
       pic.albedo_from = p.meta.source.at("panel_albedo");
@@ -466,6 +472,13 @@ msgs::io::PanelSchedule calibrate_with_panels(std::vector<Item>& panels, const s
     pic.reading = msgs::io::read_panel(img.raw, p.rad, *p.meta.panel_area, src);
     responses.push_back({pic.reading.mean, pic.albedo, p.meta.time_s});
     pictures.push_back(pic);
+  }
+  if (replaced.size() > 1) {
+    std::string own;
+    for (double a : replaced) own += cat(own.empty() ? "" : ", ", msgs::io::short_number(a, 4));
+    std::printf("  warning: %s: --panel-albedo gives one reflectance to panels the camera marks as of several"
+                " (%s, Xmp.Camera.Albedo): give each panel its own in --panels, or leave --panel-albedo out\n",
+                band.c_str(), own.c_str());
   }
   // Panels of several reflectances: the empirical line's offset (0 where they do not give one, or
   // where --panel-offset zero keeps the line through zero).
@@ -1221,7 +1234,8 @@ int run_import(const std::vector<std::string>& argv) {
             Item other = panels[k];
             other.meta.panel_area = panel_list[i].area;
             other.meta.panel_albedo = panel_list[i].albedo;
-            if (!panel_list[i].albedo) other.meta.source.erase("panel_albedo");
+            if (panel_list[i].albedo) other.meta.source["panel_albedo"] = "--panels";
+            else other.meta.source.erase("panel_albedo");
             panels.push_back(std::move(other));
           }
       std::vector<msgs::io::CaptureFiles> flight;

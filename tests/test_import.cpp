@@ -769,6 +769,11 @@ TEST_CASE("msgs import --radiometry panel: a grey and a dark panel give an empir
   CHECK_MESSAGE(zero.second.find("(the offset of their line, which --panel-offset zero leaves in?)") != std::string::npos,
                 zero.second);
   CHECK(zero.second.find("lie on a line") == std::string::npos);
+  // --panel-albedo in place of the two panels' own reflectances makes them one: a warning says so.
+  const auto one_albedo = import_raw(dir, "ds_one", "--colmap false --radiometry panel --panel-albedo 0.5");
+  CHECK_MESSAGE(one_albedo.second.find("warning: MS_NIR: --panel-albedo gives one reflectance to panels the camera"
+                                       " marks as of several (0.1082, 0.5265, Xmp.Camera.Albedo)") != std::string::npos,
+                one_albedo.second);
   const auto wrong = import_raw(dir, "ds_wrong", "--colmap false --radiometry reflectance --panel-offset zero");
   CHECK(wrong.first == 2);
   CHECK_MESSAGE(wrong.second.find("--panel-offset goes with --radiometry panel or panel+dls") != std::string::npos,
@@ -803,6 +808,25 @@ TEST_CASE("msgs import --radiometry panel: a dark tarp beside the panel, listed 
   const Json tf = Json::parse(slurp(dir / "ds" / "transforms.json"));
   CHECK(tf["msgs_import"]["calibration_panels"].size() == 8);  // two areas in each of the 4 pictures
   check_panel_line(dir, opt, ok.second);
+  // The grey panel's reflectance from --panel-albedo (per band, as from a calibration sheet) and
+  // the tarp's from the list: --panel-albedo leaves the listed reflectances alone, so the line is
+  // the same (the run ends before COLMAP, once the radiometry is logged).
+  std::string per_band;
+  for (auto& p : list["pictures"]) {
+    const std::string file = p["file"];
+    if (p["albedo"].get<double>() < 0.3) continue;  // the tarp's
+    const std::string band = file.substr(file.find("_MS_") + 1, file.size() - file.find("_MS_") - 5);
+    per_band += (per_band.empty() ? "" : ",") + band + "=" + std::to_string(p["albedo"].get<double>());
+    p.erase("albedo");
+  }
+  msgs::io::write_text_atomic(dir / "panels3.json", list.dump(1));
+  const auto by_arg = import_raw(dir, "ds3", "--colmap false --radiometry panel --panels '" +
+                                                 (dir / "panels3.json").string() + "' --panel-albedo " + per_band);
+  CHECK(by_arg.first == 1);
+  CHECK_MESSAGE(by_arg.second.find("MS_NIR: panels of reflectance 0.0901 to 0.") != std::string::npos, by_arg.second);
+  CHECK_MESSAGE(by_arg.second.find("lie on a line with an offset of 0.03") != std::string::npos, by_arg.second);
+  CHECK_MESSAGE(by_arg.second.find("(--panel-albedo)") != std::string::npos, by_arg.second);
+  CHECK(by_arg.second.find("disagree") == std::string::npos);
 }
 
 TEST_CASE("msgs import: a DJI flight's sunlight sensor, with the panel pictures listed by hand or without") {
