@@ -1061,6 +1061,13 @@ TEST_CASE("msgs import --matching window and gps: the pairs of nearby captures r
   const auto import = [&](const std::string& flags, const std::string& out) {
     return import_raw(dir, out, "--radiometry none " + flags);
   };
+  // Every image in the model: COLMAP's mapper registers most (all 20 in most runs, 17 in one
+  // CI run, its multi-threaded RANSAC not being deterministic), the rest join it from a second
+  // model or through the rig.
+  const auto whole_set = [](const Json& mi) {
+    CHECK(mi["registered"].get<int>() >= 16);
+    CHECK(mi["registered"].get<int>() + mi["from_models_of_the_rest"].get<int>() + mi["placed_by_rig"].get<int>() == 20);
+  };
   // 20 images: 190 pairs in all; a window of 2 captures keeps the 30 within the captures and the
   // 28 of one band 1 or 2 captures apart.
   const auto log_run = import_ok(dir, "ds", "--radiometry none --matching window --window 2");
@@ -1072,7 +1079,7 @@ TEST_CASE("msgs import --matching window and gps: the pairs of nearby captures r
   CHECK(ds.frames.size() == 20);
   const Json tf = Json::parse(slurp(dir / "ds" / "transforms.json"));
   CHECK(tf["msgs_import"]["colmap_matching"] == "window 2");
-  CHECK(tf["msgs_import"]["registered"] == 20);
+  whole_set(tf["msgs_import"]);
   CHECK(tf["msgs_import"]["mean_reprojection_error_px"].get<double>() < 1.0);
 
   // Bad values are refused before any work, naming the option.
@@ -1108,7 +1115,7 @@ TEST_CASE("msgs import --matching window and gps: the pairs of nearby captures r
   CHECK_MESSAGE(log_g.find("matching the 2 nearest captures by GPS: 58 of the 190 pairs") != std::string::npos, log_g);
   const Json tg = Json::parse(slurp(dir / "gps" / "transforms.json"));
   CHECK(tg["msgs_import"]["colmap_matching"] == "gps 2 nearest");
-  CHECK(tg["msgs_import"]["registered"] == 20);
+  whole_set(tg["msgs_import"]);
 
   // A capture without a position: an error naming it and its files, the way out, nothing left.
   for (int band = 1; band <= 5; ++band)
