@@ -9,6 +9,6 @@
 namespace msgs {
 // test_train, test_exposure, test_checkpoint; instantiated in shared_trainers.cpp.
 extern template class Trainer<Gaussian<7, 1>>;
-// test_train_parity; instantiated in run_experiment_sh0.cpp, whose Joint trainer it is anyway.
+// test_train_parity; instantiated in examples/experiment_sh0.cpp, run_experiment<0>'s Joint trainer.
 extern template class Trainer<Gaussian<7, 0>>;
 }  // namespace msgs
