@@ -141,7 +141,9 @@ constexpr const char* kUsage =
     "                      picture or for all (else --panel-albedo or Camera:Albedo). Their\n"
     "                      captures are set aside in every mode; with panel and panel+dls each\n"
     "                      listed picture calibrates its band. List a picture once for each panel\n"
-    "                      it shows: panels of reflectances 2 times apart or more in one session\n"
+    "                      it shows (a further panel's reflectance comes from the list or\n"
+    "                      --panel-albedo, never from Camera:Albedo, the camera's own panel's):\n"
+    "                      panels of reflectances 2 times apart or more in one session\n"
     "                      give an empirical line, response = E (albedo + offset), whose offset\n"
     "                      (haze, a black level a little off) every image then loses\n"
     "  --panel-offset O    fit (default): the empirical line's offset where the panels give one;\n"
@@ -484,24 +486,22 @@ msgs::io::PanelSchedule calibrate_with_panels(std::vector<Item>& panels, const s
   // where --panel-offset zero keeps the line through zero).
   msgs::io::PanelLine line = msgs::io::panel_line(responses);
   const bool forced_through_zero = line.fitted() && !fit_offset;
-  if (forced_through_zero) {
-    std::printf("  %s: panels of reflectance %.3g to %.3g in %zu session%s would give an offset of %.4g;"
-                " --panel-offset zero keeps the line through zero\n",
-                band.c_str(), line.low_albedo, line.high_albedo, line.sessions, line.sessions == 1 ? "" : "s",
-                line.offset);
-    line_report["offset"] = 0.0;
-    line_report["fitted_offset_not_used"] = line.offset;
+  if (line.fitted()) {
+    const char* const sessions = line.sessions == 1 ? "" : "s";
+    if (forced_through_zero)
+      std::printf("  %s: panels of reflectance %.3g to %.3g in %zu session%s would give an offset of %.4g;"
+                  " --panel-offset zero keeps the line through zero\n",
+                  band.c_str(), line.low_albedo, line.high_albedo, line.sessions, sessions, line.offset);
+    else
+      std::printf("  %s: panels of reflectance %.3g to %.3g in %zu session%s lie on a line with an offset of %.4g:"
+                  " each image's reflectance is response / E %s %.4g\n",
+                  band.c_str(), line.low_albedo, line.high_albedo, line.sessions, sessions, line.offset,
+                  line.offset < 0 ? "+" : "-", std::abs(line.offset));
+    line_report["offset"] = forced_through_zero ? 0.0 : line.offset;
+    if (forced_through_zero) line_report["fitted_offset_not_used"] = line.offset;
     line_report["sessions"] = line.sessions;
     line_report["albedo_range"] = {line.low_albedo, line.high_albedo};
-    line.offset = 0.0;
-  } else if (line.fitted()) {
-    std::printf("  %s: panels of reflectance %.3g to %.3g in %zu session%s lie on a line with an offset of %.4g:"
-                " each image's reflectance is response / E %s %.4g\n",
-                band.c_str(), line.low_albedo, line.high_albedo, line.sessions, line.sessions == 1 ? "" : "s",
-                line.offset, line.offset < 0 ? "+" : "-", std::abs(line.offset));
-    line_report["offset"] = line.offset;
-    line_report["sessions"] = line.sessions;
-    line_report["albedo_range"] = {line.low_albedo, line.high_albedo};
+    if (forced_through_zero) line.offset = 0.0;
   } else if (!line.problem.empty()) {  // panels of several reflectances that give no line: say why
     std::printf("  warning: %s: no empirical line from the panels: %s; the line through zero is used\n", band.c_str(),
                 line.problem.c_str());
