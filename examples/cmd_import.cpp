@@ -1232,6 +1232,12 @@ int run_import(const std::vector<std::string>& argv) {
         if (const auto more = more_panels.find(panels[k].source); more != more_panels.end())
           for (std::size_t i : more->second) {
             Item other = panels[k];
+            // A further panel in a picture: the camera's Camera:Albedo is its own panel's, not this one's.
+            if (by_panel && !panel_list[i].albedo && !panel_albedo.count(other.band) && !panel_albedo.count(""))
+              fail(panels_file, cat("pictures[", i, "].albedo"),
+                   cat("missing: '", panel_list[i].file.generic_string(), "' is listed again, for a further panel,"
+                       " whose reflectance Xmp.Camera.Albedo cannot give (where the camera writes one, it is its own"
+                       " panel's): give it here, or for band ", other.band, " with --panel-albedo ", other.band, "=0.49"));
             other.meta.panel_area = panel_list[i].area;
             other.meta.panel_albedo = panel_list[i].albedo;
             if (panel_list[i].albedo) other.meta.source["panel_albedo"] = "--panels";

@@ -827,6 +827,18 @@ TEST_CASE("msgs import --radiometry panel: a dark tarp beside the panel, listed 
   CHECK_MESSAGE(by_arg.second.find("lie on a line with an offset of 0.03") != std::string::npos, by_arg.second);
   CHECK_MESSAGE(by_arg.second.find("(--panel-albedo)") != std::string::npos, by_arg.second);
   CHECK(by_arg.second.find("disagree") == std::string::npos);
+  // A further area without a reflectance in the list or --panel-albedo: the import stops before it
+  // reads a picture, naming the entry (the camera's own reflectance would be its first panel's).
+  Json bare = Json::parse(slurp(dir / "panels2.json"));
+  for (std::size_t i = 4; i < bare["pictures"].size(); ++i) bare["pictures"][i].erase("albedo");
+  msgs::io::write_text_atomic(dir / "panels4.json", bare.dump(1));
+  const auto missing = import_raw(dir, "ds4", "--colmap false --radiometry panel --panels '" +
+                                                  (dir / "panels4.json").string() + "'");
+  CHECK(missing.first == 1);
+  CHECK_MESSAGE(missing.second.find("panels4.json: field 'pictures[") != std::string::npos, missing.second);
+  CHECK_MESSAGE(missing.second.find("].albedo': missing: '") != std::string::npos, missing.second);
+  CHECK_MESSAGE(missing.second.find("is listed again, for a further panel") != std::string::npos, missing.second);
+  CHECK_FALSE(fs::exists(dir / "ds4" / "transforms.json"));
 }
 
 TEST_CASE("msgs import: a DJI flight's sunlight sensor, with the panel pictures listed by hand or without") {
