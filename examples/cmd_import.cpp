@@ -56,7 +56,8 @@ constexpr const char* kUsage =
     "                   [--panels FILE] [--panel-offset fit|zero]\n"
     "                   [--matching exhaustive|window|gps]\n"
     "                   [--window N] [--neighbours K] [--sift-threshold T] [--ba-tolerance X]\n"
-    "                   [--merge-models on|off] [--rig on|off] [--allow-partial] [--downscales N]\n"
+    "                   [--merge-models on|off] [--rig on|off] [--poses-from DATASET]\n"
+    "                   [--allow-partial] [--downscales N]\n"
     "                   [--light-sensor-heading report|correct]\n"
     "                   [--force]\n"
     "                   [--colmap BIN] [--exiv2 BIN] [--keep-work]\n"
@@ -171,6 +172,13 @@ constexpr const char* kUsage =
     "  --merge-models M    on (default: step 4) or off (the main model only)\n"
     "  --rig R             on (default: place images COLMAP did not register by the rig, step 5)\n"
     "                      or off (only COLMAP's poses)\n"
+    "  --poses-from DATASET  the poses, lenses and sparse points of an earlier import of these\n"
+    "                      captures (its folder) in place of steps 3-5: COLMAP does not run, only\n"
+    "                      the radiometry is done anew, e.g. to try another --radiometry on a\n"
+    "                      flight whose COLMAP run took hours. Each image takes the pose of the\n"
+    "                      frame whose \"source\" is its file (relative to --images), which must\n"
+    "                      have its band and its size; msgs_import's COLMAP figures are copied.\n"
+    "                      Not with the options of steps 3-5 (--camera-model to --rig, --colmap)\n"
     "  --allow-partial     drop images that have no pose (with a warning) instead of failing\n"
     "  --downscales N      also write copies downscaled by 2, 4, .. 2^N (box filter) into images_2/,\n"
     "                      images_4/, .. (0 to 4; default 0), for `msgs train --images images_4`\n"
@@ -970,11 +978,66 @@ MergeResult merge_rest_models(const std::vector<Item>& items, std::size_t captur
   return r;
 }
 
+/// --poses-from: an earlier import of the same captures, whose poses stand in for COLMAP's.
+struct GivenPoses {
+  fs::path root, transforms;
+  nlohmann::ordered_json frames;                 ///< its transforms.json's frames
+  std::map<std::string, std::size_t> by_source;  ///< a frame's "source" -> its index in frames
+  nlohmann::ordered_json report;                 ///< its msgs_import entries on how the poses were found
+  std::vector<unsigned char> points;             ///< its sparse point cloud, the file's bytes
+};
+
+/// The keys of a frame that make its camera and pose, in the order msgs import writes them.
+constexpr const char* kPoseKeys[] = {"fl_x", "fl_y", "cx", "cy", "w",  "h",  "camera_model",     "k1",
+                                     "k2",   "k3",   "k4", "p1", "p2", "transform_matrix", "pose"};
+/// The entries of transforms.json's msgs_import that say how the poses were found.
+constexpr const char* kPoseReportKeys[] = {"registered",           "from_models_of_the_rest", "models_of_the_rest",
+                                           "placed_by_rig",        "rig",
+                                           "mean_reprojection_error_px", "colmap_camera_model",
+                                           "colmap_sift_peak_threshold", "colmap_ba_global_function_tolerance",
+                                           "colmap_matching"};
+
+/// The dataset folder `root` as --poses-from, checked as `msgs train` checks a dataset (errors
+/// name its transforms.json and the field), with a sparse point cloud and every frame's source
+/// file, once each. Read whole before the import starts, so --out may be `root` (with --force).
+GivenPoses read_given_poses(const fs::path& root) {
+  GivenPoses g;
+  g.root = root;
+  g.transforms = root / "transforms.json";
+  const std::string what = "the --poses-from dataset";
+  std::error_code ec;
+  if (!fs::is_directory(root, ec)) fail(root, cat(what, " does not exist or is not a folder"));
+  const msgs::io::Dataset ds = msgs::io::load_dataset(root);
+  if (ds.points.size() == 0)
+    fail(g.transforms, "ply_file_path",
+         cat("no sparse point cloud in ", what, ": --poses-from takes the points training starts from with the poses"));
+  const auto tf = nlohmann::ordered_json::parse(msgs::io::detail::strip_trailing_commas(msgs::io::read_text(g.transforms)));
+  g.frames = tf["frames"];
+  for (std::size_t i = 0; i < g.frames.size(); ++i) {
+    auto& f = g.frames[i];
+    for (const char* key : kPoseKeys)  // intrinsics given once for all frames, as load_dataset takes them
+      if (!f.contains(key) && tf.contains(key)) f[key] = tf[key];
+    const std::string field = cat("frames[", i, "].source");
+    if (!f.contains("source") || !f["source"].is_string())
+      fail(g.transforms, field,
+           "missing: --poses-from finds an image's pose by the file it came from, which msgs import writes as "
+           "\"source\" (relative to its --images); give every frame one");
+    const std::string src = fs::path(f["source"].get<std::string>()).lexically_normal().generic_string();
+    if (const auto [at, added] = g.by_source.emplace(src, i); !added)
+      fail(g.transforms, field, cat("'", src, "' is the source of frames[", at->second, "] too"));
+  }
+  if (tf.contains("msgs_import") && tf["msgs_import"].is_object())
+    for (const char* k : kPoseReportKeys)
+      if (tf["msgs_import"].contains(k)) g.report[k] = tf["msgs_import"][k];
+  g.points = msgs::io::read_bytes(root / tf.value("ply_file_path", std::string("sparse_pc.ply")));
+  return g;
+}
+
 int run_import(const std::vector<std::string>& argv) {
   const msgs::cli::Args args(argv,
                              {"images", "out", "camera", "bands", "eval-every", "camera-model", "radiometry", "panel-albedo", "panels", "matching",
                               "window", "neighbours", "sift-threshold", "ba-tolerance", "merge-models", "rig", "colmap", "exiv2",
-                              "downscales", "light-sensor-heading", "panel-offset"},
+                              "downscales", "light-sensor-heading", "panel-offset", "poses-from"},
                              {"force", "allow-partial", "keep-work", "help"});
   if (args.flag("help")) {
     std::fputs(kUsage, stdout);
@@ -1055,6 +1118,13 @@ int run_import(const std::vector<std::string>& argv) {
     throw msgs::cli::UsageError("--merge-models expects on or off, got '" + merge_mode + "'");
   const std::string rig_mode = args.get("rig", "on");
   if (rig_mode != "on" && rig_mode != "off") throw msgs::cli::UsageError("--rig expects on or off, got '" + rig_mode + "'");
+  const fs::path poses_from = args.has("poses-from") ? fs::absolute(args.get("poses-from")).lexically_normal() : fs::path();
+  if (!poses_from.empty())
+    for (const char* o : {"camera-model", "matching", "window", "neighbours", "sift-threshold", "ba-tolerance",
+                          "merge-models", "rig", "colmap"})
+      if (args.has(o))
+        throw msgs::cli::UsageError(cat("--", o, " says how COLMAP finds the poses; with --poses-from they come from ",
+                                        poses_from.string(), " and COLMAP does not run"));
 
   std::error_code ec;
   if (!fs::is_directory(images, ec)) fail(images, "--images folder does not exist or is not a folder");
@@ -1065,8 +1135,11 @@ int run_import(const std::vector<std::string>& argv) {
     fail(out, "output folder already exists (choose another --out, or replace it with --force)");
   if (out == images || images.lexically_relative(out).string().rfind("..", 0) != 0)
     fail(out, "--out must not be the --images folder or contain it");
+  // The earlier import's poses, read (and checked) before any work.
+  const std::optional<GivenPoses> given =
+      poses_from.empty() ? std::nullopt : std::optional<GivenPoses>(read_given_poses(poses_from));
   const std::string colmap_arg = args.get("colmap", "colmap");
-  const auto colmap = msgs::cli::find_program(colmap_arg);
+  const auto colmap = given ? std::optional<fs::path>(colmap_arg) : msgs::cli::find_program(colmap_arg);
   if (!colmap)
     fail(colmap_arg, "COLMAP executable not found (install it: apt-get install --no-install-recommends colmap, "
                      "or point --colmap at it)");
@@ -1257,6 +1330,20 @@ int run_import(const std::vector<std::string>& argv) {
     }
   }
 
+  // An image whose source file the earlier import put in another band: the two imports told the
+  // bands apart otherwise, and the poses would go to the wrong cameras.
+  if (given)
+    for (const Item& it : items) {
+      const auto k = given->by_source.find(it.source.generic_string());
+      if (k == given->by_source.end()) continue;  // no pose for it: stopped below, with the others
+      const std::string band = given->frames[k->second].value("mm_channel", std::string("D"));
+      if (band != it.band)
+        fail(given->transforms, cat("frames[", k->second, "].mm_channel"),
+             cat("'", band, "', but this import puts '", it.source.generic_string(), "' in band ", it.band, " (",
+                 scan.camera == "patterns" ? std::string("--bands") : "the " + scan.camera + " file name",
+                 "): give --camera or --bands as the import of the poses had them"));
+    }
+
   // ---- 3. radiometry: plan per band, pass 1 for the band maxima (relative radiance), pass 2 writes
   std::map<std::string, std::vector<std::size_t>> by_band;
   for (std::size_t i = 0; i < items.size(); ++i) by_band[items[i].band].push_back(i);
@@ -1373,14 +1460,14 @@ int run_import(const std::vector<std::string>& argv) {
   for (Item& it : items) {
     const fs::path src = images / it.source;
     const msgs::Image<float> raw = msgs::io::read_image(src);
-    fs::create_directories((work / "images" / it.colmap_name).parent_path(), ec);
+    if (!given) fs::create_directories((work / "images" / it.colmap_name).parent_path(), ec);
     if (it.band == "D") {
       if (raw.channels < 3) fail(src, "band D (RGB) needs a colour image");
       it.width = raw.width;
       it.height = raw.height;
       fs::copy_file(src, layout / "images" / it.out_name, ec);
       if (ec) fail(layout / "images" / it.out_name, cat("cannot copy ", src.string(), ": ", ec.message()));
-      msgs::io::write_png8(work / "images" / it.colmap_name, raw);
+      if (!given) msgs::io::write_png8(work / "images" / it.colmap_name, raw);
       write_downscaled(layout, it.out_name, raw, downscales, false);
       continue;
     }
@@ -1391,7 +1478,7 @@ int run_import(const std::vector<std::string>& argv) {
       v = std::min(v, 1.0f);
     }
     msgs::io::write_png16(layout / "images" / it.out_name, norm);
-    msgs::io::write_png8(work / "images" / it.colmap_name, sift_copy(norm));
+    if (!given) msgs::io::write_png8(work / "images" / it.colmap_name, sift_copy(norm));
     write_downscaled(layout, it.out_name, norm, downscales, true);
   }
   if (reflectance) {
@@ -1471,116 +1558,140 @@ int run_import(const std::vector<std::string>& argv) {
   std::printf("  radiometry and copies: %zu images in %.1f s\n", items.size(), since(t_meta));
   std::fflush(stdout);
 
-  // ---- 4. COLMAP
+  // ---- 4. COLMAP (or the poses of --poses-from)
   std::map<std::string, double> timings;
-  const std::string db = (work / "database.db").string();
-  double t_features = 0.0;
-  char peak[32];
-  std::snprintf(peak, sizeof peak, "%.17g", sift_threshold);
-  for (const auto& [band, idx] : by_band) {
-    const fs::path list = work / cat("list_", band, ".txt");
-    std::string text;
-    for (std::size_t i : idx) text += items[i].colmap_name + "\n";
-    msgs::io::write_text_atomic(list, text);
-    std::vector<std::string> a = {"--database_path", db, "--image_path", (work / "images").string(), "--image_list_path",
-                                  list.string(), "--ImageReader.single_camera", "1", "--ImageReader.camera_model", model,
-                                  "--SiftExtraction.use_gpu", "0", "--SiftExtraction.peak_threshold", peak};
-    // Focal length prior from the metadata: median over the band's images of mm x pixels/mm.
-    std::vector<double> f;
-    for (std::size_t i : idx)
-      if (auto fp = items[i].meta.focal_px()) f.push_back(*fp);
-    const Item& first = items[idx.front()];
-    if (f.size() == idx.size()) {
-      std::nth_element(f.begin(), f.begin() + std::ptrdiff_t(f.size() / 2), f.end());
-      const double fpx = f[f.size() / 2], cx = first.width / 2.0, cy = first.height / 2.0;
-      std::string p = model == "PINHOLE" ? cat(fpx, ",", fpx, ",", cx, ",", cy)
-                      : model == "OPENCV" ? cat(fpx, ",", fpx, ",", cx, ",", cy, ",0,0,0,0")
-                      : model == "SIMPLE_RADIAL" ? cat(fpx, ",", cx, ",", cy, ",0")
-                                                 : cat(fpx, ",", cx, ",", cy, ",0,0");
-      a.push_back("--ImageReader.camera_params");
-      a.push_back(p);
-      std::printf("  %s: focal length prior %.1f px from the metadata\n", band.c_str(), fpx);
-    } else {
-      std::printf("  %s: no focal length + focal-plane resolution in the metadata; COLMAP guesses the focal length\n",
-                  band.c_str());
-    }
-    t_features += run_colmap(colmap->string(), "feature_extractor", a, log, idx.size());
-  }
-  timings["features"] = t_features;
-  // Every pair by default: it needs no positions, and a window (msgs/io/match_pairs.hpp) misses
-  // the views a path comes back to, as a walk around a building or the next line of a survey grid
-  // does.
-  if (matching == "exhaustive") {
-    const std::size_t n_pairs = msgs::io::exhaustive_pair_count(items.size());
-    std::printf("  matching every pair: %zu\n", n_pairs);
-    // About 0.03 s (320x240) to 0.4 s (1024x768) a pair on two cores: beyond 20k pairs, hours.
-    if (n_pairs > 20000)
-      std::printf("  note: that many pairs take hours; --matching gps (by the positions in the metadata) or window "
-                  "(by the order of the files) matches only nearby captures\n");
-    timings["matching"] = run_colmap(colmap->string(), "exhaustive_matcher",
-                                     {"--database_path", db, "--SiftMatching.use_gpu", "0"}, log, 0);
-  } else {
-    std::vector<msgs::io::PairImage> pi;
-    for (const Item& it : items) pi.push_back({it.capture, it.band});
-    std::vector<std::pair<std::size_t, std::size_t>> pairs;
-    if (matching == "window") {
-      pairs = msgs::io::window_pairs(pi, std::size_t(window));
-      std::printf("  matching a window of %ld captures: %zu of the %zu pairs\n", window, pairs.size(),
-                  msgs::io::exhaustive_pair_count(items.size()));
-    } else {
-      const auto positions = capture_positions(items, scan.captures.size(), images);
-      pairs = msgs::io::neighbour_pairs(pi, positions, std::size_t(neighbours));
-      std::printf("  matching the %ld nearest captures by GPS: %zu of the %zu pairs\n", neighbours, pairs.size(),
-                  msgs::io::exhaustive_pair_count(items.size()));
-    }
-    std::string text;
-    for (const auto& [i, j] : pairs) text += items[i].colmap_name + " " + items[j].colmap_name + "\n";
-    const fs::path list = work / "match_pairs.txt";
-    msgs::io::write_text_atomic(list, text);
-    timings["matching"] = run_colmap(colmap->string(), "matches_importer",
-                                     {"--database_path", db, "--match_list_path", list.string(), "--match_type", "pairs",
-                                      "--SiftMatching.use_gpu", "0"},
-                                     log, 0);
-  }
-  fs::create_directories(work / "sparse", ec);
-  char tolerance[32];
-  std::snprintf(tolerance, sizeof tolerance, "%.17g", ba_tolerance);
-  timings["mapping"] = run_colmap(colmap->string(), "mapper",
-                                  {"--database_path", db, "--image_path", (work / "images").string(), "--output_path",
-                                   (work / "sparse").string(), "--Mapper.ba_global_function_tolerance", tolerance},
-                                  log, items.size());
-
-  // ---- 5. the largest model, registration check
-  std::vector<MapperModel> models = read_models(work / "sparse");
-  const int n_models = int(models.size());
-  if (models.empty())
-    throw msgs::io::IoError(cat("COLMAP's mapper reconstructed nothing (too few matches between the images?); ",
-                                "last lines of its log:\n", msgs::cli::tail_lines(log, 15)));
-  const fs::path best_dir = models.front().dir;
-  const msgs::io::ColmapModel best = std::move(models.front().model);
-  models.erase(models.begin());
-  std::map<std::string, const msgs::io::ColmapImage*> registered;
-  for (const auto& im : best.images) registered[im.name] = &im;
-  if (n_models > 1)
-    std::printf("  warning: COLMAP made %d separate models; keeping the largest (%zu images)\n", n_models, best.images.size());
+  std::map<std::string, const msgs::io::ColmapImage*> registered;  // colmap_name -> its pose from COLMAP
+  std::map<std::string, const nlohmann::ordered_json*> given_frame;  // colmap_name -> its frame in --poses-from
+  fs::path best_dir;
+  msgs::io::ColmapModel best;
+  int n_models = 0;
   MergeResult merged;
-  if (merge_mode == "on" && registered.size() < items.size()) {
-    merged = merge_rest_models(items, scan.captures.size(), registered, models, colmap->string(), work, log, tolerance);
-    timings["mapping"] += merged.seconds;
-    for (const auto& im : merged.images) registered[im.name] = &im;
-  }
   RigResult rig;
-  if (rig_mode == "on" && registered.size() < items.size()) {
-    rig = place_unregistered(items, scan.captures.size(), by_band, registered);
-    for (const auto& im : rig.images) registered[im.name] = &im;
+  if (given) {
+    for (const Item& it : items) {
+      const auto k = given->by_source.find(it.source.generic_string());
+      if (k == given->by_source.end()) continue;
+      const auto& f = given->frames[k->second];
+      const auto w = long(f["w"].get<double>()), h = long(f["h"].get<double>());  // (whole: load_dataset checked them)
+      if (w != it.width || h != it.height)
+        fail(given->transforms, cat("frames[", k->second, "].w"),
+             cat(w, " x ", h, " pixels, but '", it.source.generic_string(), "' is ", it.width, " x ", it.height,
+                 ": the poses are of other pictures, or of copies at another size"));
+      given_frame[it.colmap_name] = &f;
+    }
+    std::printf("  poses of %zu images from %s\n", given_frame.size(), given->transforms.string().c_str());
+  } else {
+    const std::string db = (work / "database.db").string();
+    double t_features = 0.0;
+    char peak[32];
+    std::snprintf(peak, sizeof peak, "%.17g", sift_threshold);
+    for (const auto& [band, idx] : by_band) {
+      const fs::path list = work / cat("list_", band, ".txt");
+      std::string text;
+      for (std::size_t i : idx) text += items[i].colmap_name + "\n";
+      msgs::io::write_text_atomic(list, text);
+      std::vector<std::string> a = {"--database_path", db, "--image_path", (work / "images").string(), "--image_list_path",
+                                    list.string(), "--ImageReader.single_camera", "1", "--ImageReader.camera_model", model,
+                                    "--SiftExtraction.use_gpu", "0", "--SiftExtraction.peak_threshold", peak};
+      // Focal length prior from the metadata: median over the band's images of mm x pixels/mm.
+      std::vector<double> f;
+      for (std::size_t i : idx)
+        if (auto fp = items[i].meta.focal_px()) f.push_back(*fp);
+      const Item& first = items[idx.front()];
+      if (f.size() == idx.size()) {
+        std::nth_element(f.begin(), f.begin() + std::ptrdiff_t(f.size() / 2), f.end());
+        const double fpx = f[f.size() / 2], cx = first.width / 2.0, cy = first.height / 2.0;
+        std::string p = model == "PINHOLE" ? cat(fpx, ",", fpx, ",", cx, ",", cy)
+                        : model == "OPENCV" ? cat(fpx, ",", fpx, ",", cx, ",", cy, ",0,0,0,0")
+                        : model == "SIMPLE_RADIAL" ? cat(fpx, ",", cx, ",", cy, ",0")
+                                                   : cat(fpx, ",", cx, ",", cy, ",0,0");
+        a.push_back("--ImageReader.camera_params");
+        a.push_back(p);
+        std::printf("  %s: focal length prior %.1f px from the metadata\n", band.c_str(), fpx);
+      } else {
+        std::printf("  %s: no focal length + focal-plane resolution in the metadata; COLMAP guesses the focal length\n",
+                    band.c_str());
+      }
+      t_features += run_colmap(colmap->string(), "feature_extractor", a, log, idx.size());
+    }
+    timings["features"] = t_features;
+    // Every pair by default: it needs no positions, and a window (msgs/io/match_pairs.hpp) misses
+    // the views a path comes back to, as a walk around a building or the next line of a survey grid
+    // does.
+    if (matching == "exhaustive") {
+      const std::size_t n_pairs = msgs::io::exhaustive_pair_count(items.size());
+      std::printf("  matching every pair: %zu\n", n_pairs);
+      // About 0.03 s (320x240) to 0.4 s (1024x768) a pair on two cores: beyond 20k pairs, hours.
+      if (n_pairs > 20000)
+        std::printf("  note: that many pairs take hours; --matching gps (by the positions in the metadata) or window "
+                    "(by the order of the files) matches only nearby captures\n");
+      timings["matching"] = run_colmap(colmap->string(), "exhaustive_matcher",
+                                       {"--database_path", db, "--SiftMatching.use_gpu", "0"}, log, 0);
+    } else {
+      std::vector<msgs::io::PairImage> pi;
+      for (const Item& it : items) pi.push_back({it.capture, it.band});
+      std::vector<std::pair<std::size_t, std::size_t>> pairs;
+      if (matching == "window") {
+        pairs = msgs::io::window_pairs(pi, std::size_t(window));
+        std::printf("  matching a window of %ld captures: %zu of the %zu pairs\n", window, pairs.size(),
+                    msgs::io::exhaustive_pair_count(items.size()));
+      } else {
+        const auto positions = capture_positions(items, scan.captures.size(), images);
+        pairs = msgs::io::neighbour_pairs(pi, positions, std::size_t(neighbours));
+        std::printf("  matching the %ld nearest captures by GPS: %zu of the %zu pairs\n", neighbours, pairs.size(),
+                    msgs::io::exhaustive_pair_count(items.size()));
+      }
+      std::string text;
+      for (const auto& [i, j] : pairs) text += items[i].colmap_name + " " + items[j].colmap_name + "\n";
+      const fs::path list = work / "match_pairs.txt";
+      msgs::io::write_text_atomic(list, text);
+      timings["matching"] = run_colmap(colmap->string(), "matches_importer",
+                                       {"--database_path", db, "--match_list_path", list.string(), "--match_type", "pairs",
+                                        "--SiftMatching.use_gpu", "0"},
+                                       log, 0);
+    }
+    fs::create_directories(work / "sparse", ec);
+    char tolerance[32];
+    std::snprintf(tolerance, sizeof tolerance, "%.17g", ba_tolerance);
+    timings["mapping"] = run_colmap(colmap->string(), "mapper",
+                                    {"--database_path", db, "--image_path", (work / "images").string(), "--output_path",
+                                     (work / "sparse").string(), "--Mapper.ba_global_function_tolerance", tolerance},
+                                    log, items.size());
+
+    // ---- 5. the largest model, registration check
+    std::vector<MapperModel> models = read_models(work / "sparse");
+    n_models = int(models.size());
+    if (models.empty())
+      throw msgs::io::IoError(cat("COLMAP's mapper reconstructed nothing (too few matches between the images?); ",
+                                  "last lines of its log:\n", msgs::cli::tail_lines(log, 15)));
+    best_dir = models.front().dir;
+    best = std::move(models.front().model);
+    models.erase(models.begin());
+    for (const auto& im : best.images) registered[im.name] = &im;
+    if (n_models > 1)
+      std::printf("  warning: COLMAP made %d separate models; keeping the largest (%zu images)\n", n_models, best.images.size());
+    if (merge_mode == "on" && registered.size() < items.size()) {
+      merged = merge_rest_models(items, scan.captures.size(), registered, models, colmap->string(), work, log, tolerance);
+      timings["mapping"] += merged.seconds;
+      for (const auto& im : merged.images) registered[im.name] = &im;
+    }
+    if (rig_mode == "on" && registered.size() < items.size()) {
+      rig = place_unregistered(items, scan.captures.size(), by_band, registered);
+      for (const auto& im : rig.images) registered[im.name] = &im;
+    }
   }
   std::vector<std::string> missing;
   for (const auto& it : items)
-    if (!registered.count(it.colmap_name)) missing.push_back(cat(it.source.generic_string(), " (", it.band, ")"));
+    if (!registered.count(it.colmap_name) && !given_frame.count(it.colmap_name))
+      missing.push_back(cat(it.source.generic_string(), " (", it.band, ")"));
   if (!missing.empty()) {
     std::string why;
     for (const auto& p : merged.problems) why += "\n  models of the rest: " + p;
     for (const auto& p : rig.rig.problems) why += "\n  rig: " + p;
+    if (given && !args.flag("allow-partial"))
+      fail(given->transforms, "frames",
+           cat(missing.size(), " of ", items.size(), " images have no frame here: ", list_some(missing, 12),
+               "\n  (not in the import of the poses, or other captures? --allow-partial drops them and goes on)"));
     if (!args.flag("allow-partial"))
       fail(images, cat(missing.size(), " of ", items.size(), " images have no pose: COLMAP did not register them",
                        rig_mode == "on" ? " and the rig could not place them" : "", ": ", list_some(missing, 12), why,
@@ -1591,7 +1702,7 @@ int run_import(const std::vector<std::string>& argv) {
   }
   // Mean reprojection error from model_analyzer.
   std::optional<double> reproj;
-  {
+  if (!given) {
     const fs::path alog = work / "model_analyzer.log";
     const int rc = msgs::cli::run_process({colmap->string(), "model_analyzer", "--path", best_dir.string()}, alog, alog);
     if (rc == 0) {
@@ -1612,16 +1723,21 @@ int run_import(const std::vector<std::string>& argv) {
   meta_json["source"] = images.string();
   meta_json["captures"] = scan.captures.size();
   const std::size_t n_main = items.size() - missing.size() - merged.images.size() - rig.images.size();
-  meta_json["registered"] = n_main;
-  meta_json["from_models_of_the_rest"] = merged.images.size();
-  if (!merged.report.is_null() || !merged.problems.empty()) {  // the second mapper ran, or why it did not
-    nlohmann::ordered_json mj;
-    mj["models"] = merged.report.is_null() ? nlohmann::ordered_json::array() : merged.report;
-    mj["problems"] = merged.problems;
-    meta_json["models_of_the_rest"] = mj;
+  if (given) {  // how the poses were found, as the import of them says
+    meta_json["poses_from"] = given->root.string();
+    for (const auto& [key, value] : given->report.items()) meta_json[key] = value;
+  } else {
+    meta_json["registered"] = n_main;
+    meta_json["from_models_of_the_rest"] = merged.images.size();
+    if (!merged.report.is_null() || !merged.problems.empty()) {  // the second mapper ran, or why it did not
+      nlohmann::ordered_json mj;
+      mj["models"] = merged.report.is_null() ? nlohmann::ordered_json::array() : merged.report;
+      mj["problems"] = merged.problems;
+      meta_json["models_of_the_rest"] = mj;
+    }
+    meta_json["placed_by_rig"] = rig.images.size();
+    if (!rig.images.empty()) meta_json["rig"] = rig.report;
   }
-  meta_json["placed_by_rig"] = rig.images.size();
-  if (!rig.images.empty()) meta_json["rig"] = rig.report;
   meta_json["images"] = items.size();
   if (!panel_keys.empty()) meta_json["calibration_captures_set_aside"] = panel_keys;
   if (!panel_report.empty()) meta_json["calibration_panels"] = panel_report;
@@ -1629,55 +1745,63 @@ int run_import(const std::vector<std::string>& argv) {
   if (reflectance) meta_json["reflectance_percentiles"] = reflectance_percentiles;
   if (band_ratios) meta_json["sun_sensor_common_scale"] = {{"scale", common}, {"brightest_band", brightest_band}};
   if (!heading_report.empty()) meta_json["light_sensor_heading"] = heading_report;
-  meta_json["mean_reprojection_error_px"] = opt_number(reproj);
-  meta_json["colmap_camera_model"] = model;
-  meta_json["colmap_sift_peak_threshold"] = sift_threshold;
-  meta_json["colmap_ba_global_function_tolerance"] = ba_tolerance;
-  meta_json["colmap_matching"] = matching == "window" ? cat("window ", window)
-                                  : matching == "gps"  ? cat("gps ", neighbours, " nearest")
-                                                       : matching;
+  if (!given) {
+    meta_json["mean_reprojection_error_px"] = opt_number(reproj);
+    meta_json["colmap_camera_model"] = model;
+    meta_json["colmap_sift_peak_threshold"] = sift_threshold;
+    meta_json["colmap_ba_global_function_tolerance"] = ba_tolerance;
+    meta_json["colmap_matching"] = matching == "window" ? cat("window ", window)
+                                    : matching == "gps"  ? cat("gps ", neighbours, " nearest")
+                                                         : matching;
+  }
   tf["msgs_import"] = meta_json;
   nlohmann::ordered_json frames = nlohmann::ordered_json::array();
   std::vector<std::string> train, eval;
   std::size_t n_frames = 0;
   for (const Item& it : items) {
     const auto reg = registered.find(it.colmap_name);
-    if (reg == registered.end()) {
+    const auto gf = given_frame.find(it.colmap_name);
+    if (reg == registered.end() && gf == given_frame.end()) {
       fs::remove(layout / "images" / it.out_name, ec);
       for (long k = 1; k <= downscales; ++k) fs::remove(layout / cat("images_", 1 << k) / it.out_name, ec);
       continue;
     }
-    const msgs::io::ColmapImage& im = *reg->second;
     nlohmann::ordered_json f;
     f["file_path"] = "images/" + it.out_name;
     f["mm_channel"] = it.band;
-    f["fl_x"] = tidy(im.camera.fx);
-    f["fl_y"] = tidy(im.camera.fy);
-    f["cx"] = tidy(im.camera.cx);
-    f["cy"] = tidy(im.camera.cy);
-    f["w"] = im.camera.width;
-    f["h"] = im.camera.height;
-    using M = msgs::io::Distortion::Model;
-    f["camera_model"] = im.dist.model == M::none ? "PINHOLE" : im.dist.model == M::fisheye ? "OPENCV_FISHEYE" : "OPENCV";
-    f["k1"] = im.dist.k1;
-    f["k2"] = im.dist.k2;
-    f["k3"] = im.dist.k3;
-    f["k4"] = im.dist.k4;
-    f["p1"] = im.dist.p1;
-    f["p2"] = im.dist.p2;
-    const Eigen::Matrix4f c2w = im.camera.opengl_c2w();
-    nlohmann::ordered_json rows = nlohmann::ordered_json::array();
-    for (int r = 0; r < 4; ++r) {
-      nlohmann::ordered_json row = nlohmann::ordered_json::array();
-      for (int c = 0; c < 4; ++c) row.push_back(tidy(c2w(r, c)));
-      rows.push_back(row);
+    if (gf != given_frame.end()) {  // camera and pose as the import of them wrote them
+      for (const char* key : kPoseKeys)
+        if (gf->second->contains(key)) f[key] = (*gf->second)[key];
+    } else {
+      const msgs::io::ColmapImage& im = *reg->second;
+      f["fl_x"] = tidy(im.camera.fx);
+      f["fl_y"] = tidy(im.camera.fy);
+      f["cx"] = tidy(im.camera.cx);
+      f["cy"] = tidy(im.camera.cy);
+      f["w"] = im.camera.width;
+      f["h"] = im.camera.height;
+      using M = msgs::io::Distortion::Model;
+      f["camera_model"] = im.dist.model == M::none ? "PINHOLE" : im.dist.model == M::fisheye ? "OPENCV_FISHEYE" : "OPENCV";
+      f["k1"] = im.dist.k1;
+      f["k2"] = im.dist.k2;
+      f["k3"] = im.dist.k3;
+      f["k4"] = im.dist.k4;
+      f["p1"] = im.dist.p1;
+      f["p2"] = im.dist.p2;
+      const Eigen::Matrix4f c2w = im.camera.opengl_c2w();
+      nlohmann::ordered_json rows = nlohmann::ordered_json::array();
+      for (int r = 0; r < 4; ++r) {
+        nlohmann::ordered_json row = nlohmann::ordered_json::array();
+        for (int c = 0; c < 4; ++c) row.push_back(tidy(c2w(r, c)));
+        rows.push_back(row);
+      }
+      f["transform_matrix"] = rows;
+      const auto from = rig.from.find(it.colmap_name);
+      const auto carried = merged.from.find(it.colmap_name);
+      f["pose"] = from != rig.from.end()        ? "rig from " + from->second
+                  : carried != merged.from.end() ? carried->second
+                                                 : "colmap";
     }
-    f["transform_matrix"] = rows;
-    const auto from = rig.from.find(it.colmap_name);
-    const auto carried = merged.from.find(it.colmap_name);
-    f["pose"] = from != rig.from.end()        ? "rig from " + from->second
-                : carried != merged.from.end() ? carried->second
-                                               : "colmap";
     f["source"] = it.source.generic_string();
     f["capture"] = scan.captures[it.capture].key;
     nlohmann::ordered_json rad;
@@ -1735,7 +1859,10 @@ int run_import(const std::vector<std::string>& argv) {
     cloud.rgb.insert(cloud.rgb.end(), merged.points.rgb.begin(), merged.points.rgb.end());
   else
     cloud.rgb.clear();
-  msgs::io::write_point_cloud(layout / "sparse_pc.ply", cloud);
+  if (given)  // the file as it was
+    msgs::io::write_bytes_atomic(layout / "sparse_pc.ply", given->points.data(), given->points.size());
+  else
+    msgs::io::write_point_cloud(layout / "sparse_pc.ply", cloud);
   // Self-check: the layout loads.
   const msgs::io::Dataset check = msgs::io::load_dataset(layout);
   if (check.frames.size() != n_frames) fail(layout / "transforms.json", "self-check: frame count differs after loading");
@@ -1745,6 +1872,12 @@ int run_import(const std::vector<std::string>& argv) {
   if (args.flag("keep-work")) std::printf("  work folder kept: %s\n", work.string().c_str());
 
   std::printf("wrote %s\n", out.string().c_str());
+  if (given) {
+    std::printf("  frames: %zu (%zu train, %zu eval), posed as in %s; sparse_pc.ply copied from there\n", n_frames,
+                train.size(), eval.size(), given->root.string().c_str());
+    std::printf("  time: %.1f s\n", since(t_start));
+    return 0;
+  }
   std::printf("  frames: %zu (%zu train, %zu eval), registered %zu of %zu images in the largest of %d model(s)%s%s\n",
               n_frames, train.size(), eval.size(), n_main, items.size(), n_models,
               merged.images.empty() ? "" : cat(", ", merged.images.size(), " carried over from models of the rest").c_str(),

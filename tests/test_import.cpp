@@ -24,8 +24,10 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -136,6 +138,80 @@ std::optional<fs::path> colmap_case(const std::string& name, const std::string& 
   return dir;
 }
 
+/// The scene's own cameras for the raw set of `opt` in dir/raw (captures, bands and sizes as
+/// write_synthetic_raw makes them), as the dataset folder dir/truth that `msgs import --poses-from`
+/// takes: a frame for each image msgs imports, naming its raw file as its source (and as its image,
+/// which the dataset check wants to find), and sparse points sampled from the scene. It stands in
+/// for COLMAP in the cases that check the radiometry: theirs does not depend on the poses.
+fs::path write_truth_poses(const fs::path& dir, const msgs::synth::RawOptions& opt) {
+  const msgs::synth::SynthPreset preset = raw_set_preset(opt);
+  const msgs::synth::SynthScene scene = msgs::synth::make_scene(preset, opt.seed);
+  const int captures = int(scene.captures.size());
+  nlohmann::ordered_json tf, frames = nlohmann::ordered_json::array();
+  for (int c = 0; c < captures; ++c)
+    for (const auto& b : msgs::synth::raw_bands(opt.camera)) {
+      if (!b.rgb && b.mount == msgs::synth::Band::D) continue;  // (MicaSense's blue, which msgs does not import)
+      const std::string name = msgs::synth::raw_file_name(opt.camera, b, c, captures);
+      nlohmann::ordered_json f =
+          msgs::synth::detail::frame_json(scene.captures[std::size_t(c)].cameras[std::size_t(b.mount)], b.mount, c);
+      f["file_path"] = "../raw/" + name;
+      f["pose"] = "the synthetic scene's";
+      f["source"] = name;
+      frames.push_back(f);
+    }
+  tf["ply_file_path"] = "sparse_pc.ply";
+  tf["frames"] = frames;
+  const fs::path truth = dir / "truth";
+  fs::create_directories(truth);
+  msgs::io::write_text_atomic(truth / "transforms.json", tf.dump(1));
+  std::vector<int> all(static_cast<std::size_t>(captures));
+  for (int c = 0; c < captures; ++c) all[std::size_t(c)] = c;
+  msgs::io::write_text_atomic(truth / "sparse_pc.ply",
+                              msgs::synth::detail::ply_text(msgs::synth::sample_sparse_points(scene, all, 200, opt.seed)));
+  return truth;
+}
+
+/// The scratch folder of a test case that imports with the scene's own poses (write_truth_poses,
+/// in dir/truth), with the raw set of `opt` written into raw/; nullopt, with a message saying what
+/// goes untested, when exiv2 is not on PATH.
+std::optional<fs::path> truth_case(const std::string& name, const std::string& untested,
+                                   const msgs::synth::RawOptions& opt = small_micasense_set()) {
+  if (!on_path("exiv2")) {
+    MESSAGE("SKIPPED: the exiv2 binary is not on PATH (scripts/setup.sh installs it); " << untested << " not tested");
+    return std::nullopt;
+  }
+  const fs::path dir = fresh_dir(name);
+  msgs::synth::write_synthetic_raw(dir / "raw", opt);
+  write_truth_poses(dir, opt);
+  return dir;
+}
+
+/// --poses-from for the dataset of truth_case.
+std::string truth_poses(const fs::path& dir) { return " --poses-from '" + (dir / "truth").string() + "'"; }
+
+/// Dataset `a` was imported with --poses-from `b`: each frame has the camera and pose of b's frame
+/// of the same source file, to the bit, the point cloud is b's, and msgs_import says where they
+/// came from and carries b's account of how they were found.
+void check_poses_from(const fs::path& a, const fs::path& b) {
+  const Json ta = Json::parse(slurp(a / "transforms.json")), tb = Json::parse(slurp(b / "transforms.json"));
+  const Json ma = ta.value("msgs_import", Json::object()), mb = tb.value("msgs_import", Json::object());
+  CHECK(ma["poses_from"] == b.string());
+  for (const char* k : {"registered", "placed_by_rig", "mean_reprojection_error_px", "colmap_matching"})
+    CHECK_MESSAGE(ma.value(k, Json()) == mb.value(k, Json()), k);
+  std::map<std::string, Json> of_source;
+  for (const auto& f : tb["frames"]) of_source[f["source"].get<std::string>()] = f;
+  CHECK(ta["frames"].size() == tb["frames"].size());
+  for (const auto& f : ta["frames"]) {
+    const std::string src = f["source"];
+    const auto g = of_source.find(src);
+    REQUIRE_MESSAGE(g != of_source.end(), src);
+    for (const char* k : {"mm_channel", "fl_x", "fl_y", "cx", "cy", "w", "h", "camera_model", "k1", "k2", "k3", "k4",
+                          "p1", "p2", "transform_matrix", "pose"})
+      CHECK_MESSAGE(f[k] == g->second[k], src << ": " << k);
+  }
+  CHECK(slurp(a / "sparse_pc.ply") == slurp(b / "sparse_pc.ply"));
+}
+
 // The (exit status, log) pairs below are taken apart into plain variables, not structured
 // bindings: CHECK_MESSAGE and INFO name them inside lambdas, which Clang before 16 refuses.
 
@@ -204,12 +280,12 @@ double median_ratio_to_truth(const fs::path& dir, const fs::path& ds, const Json
 }
 
 /// `msgs import --radiometry reflectance` of dir/raw (a 5-capture MicaSense set written with `opt`)
-/// into dir/ds: its log and transforms.json, once every one of the 20 frames was normalised with
+/// into dir/ds, posed as the scene (truth_case): its log and transforms.json, once every one of the 20 frames was normalised with
 /// its irradiance from `irradiance_key` and gives the scene's values, the reflectances, back within
 /// 1%, whatever its exposure and light.
 std::pair<std::string, Json> reflectance_import(const fs::path& dir, const msgs::synth::RawOptions& opt,
                                                 const std::string& irradiance_key) {
-  const auto log_run = import_ok(dir, "ds", "--radiometry reflectance");
+  const auto log_run = import_ok(dir, "ds", "--radiometry reflectance" + truth_poses(dir));
   REQUIRE_MESSAGE(log_run.first == 0, log_run.second);
   Json tf = Json::parse(slurp(dir / "ds" / "transforms.json"));
   const msgs::synth::SynthScene scene = msgs::synth::make_scene(raw_set_preset(opt), opt.seed);
@@ -443,6 +519,91 @@ TEST_CASE("msgs import: a band whose wavelength does not fit its slot is refused
   CHECK(msgs::io::wavelength_fits_band("D", 10500));     // the RGB camera has no window
 }
 
+TEST_CASE("msgs import --poses-from: the poses of another import, checked against the captures") {
+  // A small MicaSense set, first posed as the scene (no COLMAP), then imported again in other
+  // radiometry modes with the poses of the import before, once in its own place.
+  msgs::synth::RawOptions opt = small_micasense_set();
+  opt.captures = 2;
+  opt.width = 48;
+  const auto dir_or = truth_case("poses_from", "--poses-from", opt);
+  if (!dir_or) return;
+  const fs::path& dir = *dir_or;
+  const auto from = [&](const std::string& name) { return " --poses-from '" + (dir / name).string() + "'"; };
+  const auto first = import_raw(dir, "first", "--radiometry none" + from("truth"));
+  REQUIRE_MESSAGE(first.first == 0, first.second);
+  CHECK_MESSAGE(first.second.find("poses of 8 images from " + (dir / "truth" / "transforms.json").string()) !=
+                    std::string::npos,
+                first.second);
+  CHECK(first.second.find("colmap") == std::string::npos);
+  check_poses_from(dir / "first", dir / "truth");
+  CHECK(msgs::io::load_dataset(dir / "first").frames.size() == 8);
+  const auto second = import_raw(dir, "second", "--radiometry auto" + from("first"));
+  REQUIRE_MESSAGE(second.first == 0, second.second);
+  check_poses_from(dir / "second", dir / "first");
+  // In place (--force): the radiometry redone, the poses as they were.
+  const auto in_place = import_raw(dir, "first", "--radiometry auto --force" + from("first"));
+  REQUIRE_MESSAGE(in_place.first == 0, in_place.second);
+  check_poses_from(dir / "second", dir / "first");
+  CHECK(Json::parse(slurp(dir / "first" / "transforms.json"))["frames"][0]["radiometry"]["applied"] == true);
+  CHECK(!leftovers(dir, "first"));
+
+  // Poses that do not fit the captures: refused, naming the field, nothing left behind.
+  const Json truth = Json::parse(slurp(dir / "truth" / "transforms.json"));
+  const auto refused = [&](const std::string& name, const std::function<void(Json&)>& edit, const std::string& flags,
+                           const std::string& message) {
+    Json tf = truth;
+    edit(tf);
+    fs::create_directories(dir / name);
+    msgs::io::write_text_atomic(dir / name / "transforms.json", tf.dump(1));
+    if (tf.contains("ply_file_path")) fs::copy_file(dir / "truth" / "sparse_pc.ply", dir / name / "sparse_pc.ply");
+    const auto r = import_raw(dir, "out_" + name, flags + from(name));
+    CAPTURE(name);
+    CHECK(r.first == 1);
+    CHECK_MESSAGE(r.second.find(message) != std::string::npos, r.second);
+    CHECK(!fs::exists(dir / ("out_" + name)));
+    CHECK(!leftovers(dir, "out_" + name));
+  };
+  const auto frame_of = [](Json& tf, const std::string& source) -> Json& {
+    for (auto& f : tf["frames"])
+      if (f["source"] == source) return f;
+    throw std::runtime_error("no frame of " + source);
+  };
+  refused("band", [&](Json& tf) { frame_of(tf, "IMG_0001_2.tif")["mm_channel"] = "MS_R"; }, "",
+          "band/transforms.json: field 'frames[0].mm_channel': 'MS_R', but this import puts 'IMG_0001_2.tif' in band "
+          "MS_G (the micasense file name): give --camera or --bands as the import of the poses had them");
+  refused("size", [&](Json& tf) { frame_of(tf, "IMG_0001_3.tif")["w"] = 96; }, "",
+          "size/transforms.json: field 'frames[1].w': 96 x 36 pixels, but 'IMG_0001_3.tif' is 48 x 36: the poses are of "
+          "other pictures");
+  refused("source", [&](Json& tf) { frame_of(tf, "IMG_0001_3.tif").erase("source"); }, "",
+          "source/transforms.json: field 'frames[1].source': missing: --poses-from finds an image's pose by the file it "
+          "came from");
+  refused("twice", [&](Json& tf) { frame_of(tf, "IMG_0001_3.tif")["source"] = "IMG_0001_2.tif"; }, "",
+          "twice/transforms.json: field 'frames[1].source': 'IMG_0001_2.tif' is the source of frames[0] too");
+  refused("points", [&](Json& tf) { tf.erase("ply_file_path"); }, "",
+          "points/transforms.json: field 'ply_file_path': no sparse point cloud in the --poses-from dataset");
+  refused("missing", [&](Json& tf) { tf["frames"].erase(tf["frames"].size() - 1); }, "",
+          "missing/transforms.json: field 'frames': 1 of 8 images have no frame here: IMG_0002_5.tif (MS_RE)");
+  // ... unless --allow-partial drops them.
+  const auto partial = import_raw(dir, "partial", "--allow-partial" + from("missing"));
+  REQUIRE_MESSAGE(partial.first == 0, partial.second);
+  CHECK_MESSAGE(partial.second.find("warning: dropping 1 images without a pose: IMG_0002_5.tif (MS_RE)") !=
+                    std::string::npos,
+                partial.second);
+  CHECK(msgs::io::load_dataset(dir / "partial").frames.size() == 7);
+  // No such folder, and the options of COLMAP's steps beside it: refused before any work.
+  const auto absent = import_raw(dir, "absent", from("nowhere"));
+  CHECK(absent.first == 1);
+  CHECK_MESSAGE(absent.second.find("nowhere: the --poses-from dataset does not exist or is not a folder") !=
+                    std::string::npos,
+                absent.second);
+  const auto usage = import_raw(dir, "usage", "--matching window" + from("truth"));
+  CHECK(usage.first == 2);
+  CHECK_MESSAGE(usage.second.find("--matching says how COLMAP finds the poses; with --poses-from they come from") !=
+                    std::string::npos,
+                usage.second);
+  for (const char* out : {"absent", "usage"}) CHECK(!fs::exists(dir / out));
+}
+
 TEST_CASE("msgs import: synthetic MicaSense captures through exiv2 + COLMAP") {
   const auto dir_or = colmap_case("e2e", "import end to end");
   if (!dir_or) return;
@@ -523,7 +684,7 @@ TEST_CASE("msgs import --radiometry reflectance: the DLS 2 takes out changing su
   // Sunlight that changes by up to 25% from capture to capture, which the light sensor records.
   msgs::synth::RawOptions opt = small_micasense_set();
   opt.light_variation = 0.25;
-  const auto dir_or = colmap_case("reflectance", "reflectance from the light sensor", opt);
+  const auto dir_or = truth_case("reflectance", "reflectance from the light sensor", opt);
   if (!dir_or) return;
   const fs::path& dir = *dir_or;
   const auto result = reflectance_import(dir, opt, "Xmp.Camera.HorizontalIrradiance");
@@ -566,7 +727,7 @@ TEST_CASE("msgs import --radiometry reflectance: a DLS 1's tilted readings are l
   msgs::synth::RawOptions opt = small_micasense_set();
   opt.light_variation = 0.25;
   opt.dls1 = true;
-  const auto dir_or = colmap_case("reflectance_dls1", "levelling a DLS 1's readings", opt);
+  const auto dir_or = truth_case("reflectance_dls1", "levelling a DLS 1's readings", opt);
   if (!dir_or) return;
   const auto result = reflectance_import(*dir_or, opt, "Xmp.DLS.SpectralIrradiance levelled with Xmp.DLS.Yaw/Pitch/Roll");
   const std::string& log = result.first;
@@ -590,14 +751,14 @@ TEST_CASE("msgs import --radiometry panel, panel+dls: the panel capture is set a
   opt.light_variation = 0.25;
   opt.dls_bias = 0.1;
   opt.panel_captures = 1;
-  const auto dir_or = colmap_case("panel", "reflectance from a calibration panel", opt);
+  const auto dir_or = truth_case("panel", "reflectance from a calibration panel", opt);
   if (!dir_or) return;
   const fs::path& dir = *dir_or;
   const msgs::synth::SynthScene scene = msgs::synth::make_scene(raw_set_preset(opt), opt.seed);
   const int panel_capture = opt.captures;  // 0-based
 
   // The panel sets the level, the light sensor follows the light: the scene's reflectances back.
-  const auto both = import_ok(dir, "both", "--radiometry panel+dls");
+  const auto both = import_ok(dir, "both", "--radiometry panel+dls" + truth_poses(dir));
   REQUIRE_MESSAGE(both.first == 0, both.second);
   CHECK_MESSAGE(both.second.find("1 capture of a calibration panel set aside (Xmp.Camera.CalibrationPicture): IMG_0006") !=
                     std::string::npos,
@@ -639,9 +800,11 @@ TEST_CASE("msgs import --radiometry panel, panel+dls: the panel capture is set a
     CHECK(std::abs(pct[band]["p5"].get<double>() - v[v.size() * 5 / 100]) <= 0.0011);
   }
 
-  // The panel alone: every frame under the panel capture's light, off by the light's change.
-  const auto alone = import_ok(dir, "alone", "--radiometry panel");
+  // The panel alone, posed as the import before: every frame under the panel capture's light, off
+  // by the light's change.
+  const auto alone = import_ok(dir, "alone", "--radiometry panel --poses-from '" + (dir / "both").string() + "'");
   REQUIRE_MESSAGE(alone.first == 0, alone.second);
+  check_poses_from(dir / "alone", dir / "both");
   CHECK_MESSAGE(alone.second.find("which one panel irradiance does not follow; --radiometry panel+dls does") !=
                     std::string::npos,
                 alone.second);
@@ -686,10 +849,10 @@ TEST_CASE("msgs import --radiometry panel: panels before and after the flight, i
   opt.panel_captures = 1;
   opt.panel_before = true;
   opt.light_drift = 0.3;
-  const auto dir_or = colmap_case("panel_drift", "panel irradiance interpolated in time", opt);
+  const auto dir_or = truth_case("panel_drift", "panel irradiance interpolated in time", opt);
   if (!dir_or) return;
   const fs::path& dir = *dir_or;
-  const auto ok = import_ok(dir, "ds", "--radiometry panel");
+  const auto ok = import_ok(dir, "ds", "--radiometry panel" + truth_poses(dir));
   REQUIRE_MESSAGE(ok.first == 0, ok.second);
   CHECK_MESSAGE(ok.second.find("2 captures of a calibration panel set aside (Xmp.Camera.CalibrationPicture): IMG_0000, "
                                "IMG_0006") != std::string::npos,
@@ -749,10 +912,10 @@ TEST_CASE("msgs import --radiometry panel: a grey and a dark panel give an empir
   one.panel_captures = 1;
   CHECK_THROWS_WITH_AS(msgs::synth::write_synthetic_raw(msgs::testing::scratch_dir("import") / "dark1", one),
                        "a dark panel needs 2 panel captures or more (every second one shows it)", std::invalid_argument);
-  const auto dir_or = colmap_case("panel_line", "the empirical line of a grey and a dark panel", opt);
+  const auto dir_or = truth_case("panel_line", "the empirical line of a grey and a dark panel", opt);
   if (!dir_or) return;
   const fs::path& dir = *dir_or;
-  const auto ok = import_ok(dir, "ds", "--radiometry panel");
+  const auto ok = import_ok(dir, "ds", "--radiometry panel" + truth_poses(dir));
   REQUIRE_MESSAGE(ok.first == 0, ok.second);
   CHECK_MESSAGE(ok.second.find("MS_NIR: panels of reflectance 0.108 to 0.526 in 1 session lie on a line with an offset"
                                " of 0.0") != std::string::npos,
@@ -788,7 +951,7 @@ TEST_CASE("msgs import --radiometry panel: a dark tarp beside the panel, listed 
   opt.camera = "dji";
   opt.panel_captures = 1;
   opt.path_reflectance = 0.03;
-  const auto dir_or = colmap_case("panel_tarp", "two panels listed in one picture", opt);
+  const auto dir_or = truth_case("panel_tarp", "two panels listed in one picture", opt);
   if (!dir_or) return;
   const fs::path& dir = *dir_or;
   Json list = Json::parse(slurp(dir / "raw" / "panels.json"));
@@ -802,7 +965,7 @@ TEST_CASE("msgs import --radiometry panel: a dark tarp beside the panel, listed 
     list["pictures"].push_back(dark);
   }
   msgs::io::write_text_atomic(dir / "panels2.json", list.dump(1));
-  const auto ok = import_ok(dir, "ds", "--radiometry panel --panels '" + (dir / "panels2.json").string() + "'");
+  const auto ok = import_ok(dir, "ds", "--radiometry panel --panels '" + (dir / "panels2.json").string() + "'" + truth_poses(dir));
   REQUIRE_MESSAGE(ok.first == 0, ok.second);
   CHECK_MESSAGE(ok.second.find("MS_NIR: panels of reflectance 0.0901 to 0.") != std::string::npos, ok.second);
   const Json tf = Json::parse(slurp(dir / "ds" / "transforms.json"));
@@ -889,8 +1052,11 @@ TEST_CASE("msgs import: a DJI flight's sunlight sensor, with the panel pictures 
   // x SensorGainAdjustment / Irradiance = kDjiReflectanceFactor x reflectance / 1.1 in the
   // synthetic set (the sensor reads 10% high), and msgs' one scale maps the brightest value to 1:
   // every frame's ratio to the truth is that x the scale, whatever the light and the band.
-  const auto sun = import_ok(dir, "sun", "--radiometry sun-sensor --downscales 1" + list);
+  // (With the poses of the import above: COLMAP runs once.)
+  const auto sun = import_ok(dir, "sun", "--radiometry sun-sensor --downscales 1 --poses-from '" + (dir / "ds").string() +
+                                             "'" + list);
   REQUIRE_MESSAGE(sun.first == 0, sun.second);
+  check_poses_from(dir / "sun", dir / "ds");
   CHECK_MESSAGE(sun.second.find("MS_NIR: relative reflectance ") != std::string::npos, sun.second);
   const Json ts = Json::parse(slurp(dir / "sun" / "transforms.json"));
   const double common = ts["msgs_import"]["sun_sensor_common_scale"]["scale"].get<double>();
@@ -1005,17 +1171,17 @@ TEST_CASE("msgs import: a light sensor that reads higher on one heading is repor
     CHECK(std::string(e.what()).find("needs a camera with a light sensor") != std::string::npos);
   }
 
-  // Corrected, through COLMAP: every frame of DJI's formula is kDjiReflectanceFactor x the
+  // Corrected, a whole import: every frame of DJI's formula is kDjiReflectanceFactor x the
   // reflectance x msgs' one scale, over the reading's mean level: sqrt(1.06 x 0.94) x the light.
   msgs::synth::RawOptions opt = small_micasense_set();
   opt.camera = "dji";
   opt.captures = 6;
   opt.light_drift = 0.1;
   opt.heading_bias = bias;
-  const auto dir_or = colmap_case("heading_colmap", "dividing the heading's part out of the readings", opt);
+  const auto dir_or = truth_case("heading_import", "dividing the heading's part out of the readings", opt);
   if (!dir_or) return;
   const fs::path& cdir = *dir_or;
-  const auto ok = import_ok(cdir, "ds", "--radiometry sun-sensor --light-sensor-heading correct");
+  const auto ok = import_ok(cdir, "ds", "--radiometry sun-sensor --light-sensor-heading correct" + truth_poses(cdir));
   REQUIRE_MESSAGE(ok.first == 0, ok.second);
   CHECK_MESSAGE(ok.second.find("MS_NIR: the light sensor reads 12.8% (+- 0.0%) higher flying 20 degrees than flying"
                                " 200 degrees, the change in time taken out (6 captures on 6 flight lines, 0.0% scatter between"
