@@ -125,17 +125,24 @@ msgs::Image<float> raw_truth(const msgs::synth::SynthScene& scene, const msgs::s
   return msgs::synth::detail::render_radiance(scene, cam, bands[bi].spectrum_channel, rs);
 }
 
-/// The scratch folder of a test case that runs COLMAP, with the raw set of `opt` written into
-/// raw/; nullopt, with a message saying what goes untested, when colmap is not on PATH.
-std::optional<fs::path> colmap_case(const std::string& name, const std::string& untested,
-                                    const msgs::synth::RawOptions& opt = small_micasense_set()) {
-  if (!on_path("colmap")) {
-    MESSAGE("SKIPPED: the colmap binary is not on PATH (scripts/setup.sh installs it); " << untested << " not tested");
+/// The scratch folder `name` of a test case that needs `program` on PATH, with the raw set of `opt`
+/// written into raw/; nullopt, with a message saying what goes untested, when it is not there.
+std::optional<fs::path> raw_case(const std::string& program, const std::string& name, const std::string& untested,
+                                 const msgs::synth::RawOptions& opt) {
+  if (!on_path(program)) {
+    MESSAGE("SKIPPED: the " << program << " binary is not on PATH (scripts/setup.sh installs it); " << untested
+                            << " not tested");
     return std::nullopt;
   }
   const fs::path dir = fresh_dir(name);
   msgs::synth::write_synthetic_raw(dir / "raw", opt);
   return dir;
+}
+
+/// The scratch folder of a test case that runs COLMAP (raw_case).
+std::optional<fs::path> colmap_case(const std::string& name, const std::string& untested,
+                                    const msgs::synth::RawOptions& opt = small_micasense_set()) {
+  return raw_case("colmap", name, untested, opt);
 }
 
 /// The scene's own cameras for the raw set of `opt` in dir/raw (captures, bands and sizes as
@@ -171,18 +178,12 @@ fs::path write_truth_poses(const fs::path& dir, const msgs::synth::RawOptions& o
   return truth;
 }
 
-/// The scratch folder of a test case that imports with the scene's own poses (write_truth_poses,
-/// in dir/truth), with the raw set of `opt` written into raw/; nullopt, with a message saying what
-/// goes untested, when exiv2 is not on PATH.
+/// The scratch folder of a test case that imports with the scene's own poses (raw_case, and
+/// write_truth_poses into dir/truth): it needs exiv2, not COLMAP.
 std::optional<fs::path> truth_case(const std::string& name, const std::string& untested,
                                    const msgs::synth::RawOptions& opt = small_micasense_set()) {
-  if (!on_path("exiv2")) {
-    MESSAGE("SKIPPED: the exiv2 binary is not on PATH (scripts/setup.sh installs it); " << untested << " not tested");
-    return std::nullopt;
-  }
-  const fs::path dir = fresh_dir(name);
-  msgs::synth::write_synthetic_raw(dir / "raw", opt);
-  write_truth_poses(dir, opt);
+  auto dir = raw_case("exiv2", name, untested, opt);
+  if (dir) write_truth_poses(*dir, opt);
   return dir;
 }
 
