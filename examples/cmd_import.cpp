@@ -1139,8 +1139,8 @@ int run_import(const std::vector<std::string>& argv) {
   const std::optional<GivenPoses> given =
       poses_from.empty() ? std::nullopt : std::optional<GivenPoses>(read_given_poses(poses_from));
   const std::string colmap_arg = args.get("colmap", "colmap");
-  const auto colmap = given ? std::optional<fs::path>(colmap_arg) : msgs::cli::find_program(colmap_arg);
-  if (!colmap)
+  const auto colmap = given ? std::nullopt : msgs::cli::find_program(colmap_arg);  // (not run with --poses-from)
+  if (!given && !colmap)
     fail(colmap_arg, "COLMAP executable not found (install it: apt-get install --no-install-recommends colmap, "
                      "or point --colmap at it)");
   // Headless COLMAP: its Qt must not look for a display.
