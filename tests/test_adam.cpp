@@ -12,6 +12,7 @@
 
 #include "msgs/adam.hpp"
 
+namespace test_adam {
 namespace {
 
 using G7 = msgs::Gaussian<7, 1>;
@@ -404,3 +405,5 @@ TEST_CASE("colour step applied row by row (a fused backward): the bits of one st
   Model other(11);
   CHECK_THROWS_AS(adam.begin_colour(other, 0, 1), std::invalid_argument);
 }
+
+}  // namespace test_adam

@@ -12,6 +12,7 @@
 
 #include "msgs/bin.hpp"
 
+namespace test_bin {
 using namespace msgs;
 
 namespace {
@@ -215,3 +216,5 @@ TEST_CASE("bin_gaussians: tile lists front to back, pair numbering, for 1 and 2 
     CHECK(b.tile_offset.back() == 0);
   }
 }
+
+}  // namespace test_bin

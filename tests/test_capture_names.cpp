@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+namespace test_capture_names {
 namespace fs = std::filesystem;
 using namespace msgs::io;
 
@@ -152,3 +153,5 @@ TEST_CASE("capture names: scanning a folder listing groups captures and refuses 
                        doctest::Contains("two files for band MS_G"), IoError);
   CHECK_THROWS_AS(scan_capture_names("/x", {"a"}, "canon"), std::invalid_argument);
 }
+
+}  // namespace test_capture_names

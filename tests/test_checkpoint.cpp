@@ -26,6 +26,7 @@
 
 #include <omp.h>
 
+namespace test_checkpoint {
 namespace fs = std::filesystem;
 using namespace msgs;
 
@@ -330,3 +331,5 @@ TEST_CASE("checkpoint files refuse the wrong model type, truncation and trailing
   for (const auto& e : fs::directory_iterator(p.parent_path()))
     CHECK(e.path().filename().string().find(".tmp-") == std::string::npos);
 }
+
+}  // namespace test_checkpoint

@@ -10,6 +10,7 @@
 #include "msgs/io/load_scene.hpp"
 #include "scratch.hpp"
 
+namespace test_colmap {
 namespace fs = std::filesystem;
 using msgs::testing::io_error_of;
 using namespace msgs;
@@ -301,3 +302,5 @@ TEST_CASE("load_scene: detects the layout, image folders of resized copies, grey
   CHECK(!downscale_folder_factor("images_x").has_value());
   CHECK(!downscale_folder_factor("images_0").has_value());
 }
+
+}  // namespace test_colmap

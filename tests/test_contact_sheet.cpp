@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+namespace test_contact_sheet {
 using msgs::Image;
 
 namespace {
@@ -191,3 +192,5 @@ TEST_CASE("labelled contact sheet with the real font, where there is one") {
     for (int x = 0; x < s.width; ++x) ink = ink || s.at(x, y, 0) > 0.9f;
   CHECK(ink);
 }
+
+}  // namespace test_contact_sheet

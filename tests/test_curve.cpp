@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+namespace test_curve {
 namespace fs = std::filesystem;
 using namespace msgs;
 
@@ -124,3 +125,5 @@ TEST_CASE("curve file: round trip, and a malformed file is an error naming file 
   }
   CHECK_THROWS_AS(load_curve(dir / "missing.curve"), io::IoError);
 }
+
+}  // namespace test_curve

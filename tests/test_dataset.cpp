@@ -10,6 +10,7 @@
 #include "msgs/io/dataset.hpp"
 #include "scratch.hpp"
 
+namespace test_dataset {
 namespace fs = std::filesystem;
 using msgs::testing::io_error_of;
 using namespace msgs;
@@ -359,3 +360,5 @@ TEST_CASE("rotation_between maps a onto b, including opposite vectors") {
     CHECK(R.determinant() == doctest::Approx(1.0));
   }
 }
+
+}  // namespace test_dataset

@@ -15,6 +15,7 @@
 #include "msgs/densify.hpp"
 #include "msgs/spatial_order.hpp"
 
+namespace test_densify {
 using namespace msgs;
 
 namespace {
@@ -1123,3 +1124,5 @@ TEST_CASE("a reordering refinement is the plain refinement followed by a sort of
   // The result is in spatial order: sorting it again changes nothing.
   CHECK(order_by_code(morton_codes(sorted.means.data(), sorted.size())) == RefinePlan::identity(sorted.size()).source);
 }
+
+}  // namespace test_densify

@@ -27,6 +27,7 @@
 #include <string>
 #include <vector>
 
+namespace test_export {
 namespace fs = std::filesystem;
 using msgs::Image;
 
@@ -691,3 +692,5 @@ TEST_CASE("msgs export: files from a run directory, and non-zero exits that say 
   CHECK(fs::file_size(run / "model_joint.ply") == before);
 }
 #endif
+
+}  // namespace test_export

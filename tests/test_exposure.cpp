@@ -25,6 +25,7 @@
 #include <string>
 #include <vector>
 
+namespace test_exposure {
 namespace fs = std::filesystem;
 using namespace msgs;
 
@@ -451,3 +452,5 @@ TEST_CASE("result.json: \"exposure\" always, corrected metrics and learned gains
   CHECK(x["frames"][1]["file_path"] == "images/D_2.png");
   CHECK(cli::metrics_markdown(r.metrics).find("PSNR (colour-corrected) | 25.00") != std::string::npos);
 }
+
+}  // namespace test_exposure

@@ -14,6 +14,7 @@
 #include "msgs/io/image_io.hpp"
 #include "scratch.hpp"
 
+namespace test_image_io {
 namespace fs = std::filesystem;
 using msgs::Image;
 using namespace msgs::io;
@@ -391,3 +392,5 @@ TEST_CASE("16-bit PNG with 3 channels and 8-bit grey+alpha keep their channels")
   CHECK(back.channels == 2);
   CHECK(back.data[1] == doctest::Approx(std::round(double(ga.data[1]) * 255.0) / 255.0));
 }
+
+}  // namespace test_image_io

@@ -35,6 +35,7 @@
 #include "../examples/colmap_progress.hpp"
 #include "../examples/subprocess.hpp"  // the tool's way of running colmap and exiv2
 
+namespace test_import {
 namespace fs = std::filesystem;
 using Json = nlohmann::json;
 
@@ -1579,3 +1580,5 @@ TEST_CASE("colmap_progress: the latest progress line of a COLMAP log, in words")
   CHECK(msgs::cli::file_tail(p, 6) == "1 (2)\n");
   CHECK(msgs::cli::file_tail(p / "missing").empty());
 }
+
+}  // namespace test_import

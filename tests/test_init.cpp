@@ -11,6 +11,7 @@
 
 #include "msgs/init.hpp"
 
+namespace test_init {
 namespace {
 
 using G3 = msgs::Gaussian<3, 2>;
@@ -174,3 +175,5 @@ TEST_CASE("malformed input is rejected with a named field") {
   CHECK_THROWS_AS(msgs::init_random<G3>(4, {1, 0, 0}, {0, 1, 1}), std::invalid_argument);
   CHECK_THROWS_AS(msgs::knn_mean_distance({0, 0, 0}, 0), std::invalid_argument);
 }
+
+}  // namespace test_init

@@ -19,6 +19,7 @@
 #include <unistd.h>
 #endif
 
+namespace test_large_pages {
 using msgs::detail::kLargePageBytes;
 
 namespace {
@@ -158,3 +159,5 @@ TEST_CASE("populate_for_write faults a block in without changing a byte; a grown
   for (const float x : v) nonzero += x != 0.0f;
   CHECK(nonzero == 0);
 }
+
+}  // namespace test_large_pages

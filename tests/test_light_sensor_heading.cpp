@@ -18,6 +18,7 @@
 #include <msgs/io/capture_meta.hpp>
 #include <msgs/io/light_sensor_heading.hpp>
 
+namespace test_light_sensor_heading {
 using namespace msgs::io;
 
 namespace {
@@ -285,3 +286,5 @@ TEST_CASE("parse_capture_meta: the drone's heading, in [0, 360) degrees clockwis
   CHECK_FALSE(heading("Xmp.Camera.BandName NIR\n").has_value());
   CHECK_FALSE(heading("Xmp.DLS.Yaw 1e308\n").has_value());
 }
+
+}  // namespace test_light_sensor_heading

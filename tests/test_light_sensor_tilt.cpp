@@ -14,6 +14,7 @@
 #include <msgs/io/light_sensor_tilt.hpp>
 #include <msgs/io/sun_position.hpp>
 
+namespace test_light_sensor_tilt {
 using namespace msgs::io;
 
 namespace {
@@ -209,3 +210,5 @@ TEST_CASE("parse_capture_meta: a DLS 2 whose firmware wrote HorizontalIrradiance
   CHECK(b.irradiance_problem.find("before v1.2.3) wrote HorizontalIrradiance wrongly; its DLS 2's direct and scattered"
                                   " light could not be levelled: the file has no position") != std::string::npos);
 }
+
+}  // namespace test_light_sensor_tilt

@@ -11,6 +11,7 @@
 
 #include "msgs/loss.hpp"
 
+namespace test_loss {
 using msgs::Image;
 
 namespace {
@@ -450,3 +451,5 @@ TEST_CASE("scale regulariser over a row list: those rows only, normalised by N, 
   const std::vector<std::uint32_t> outside = {std::uint32_t(n)};
   CHECK_THROWS_AS(msgs::scale_reg<float>(ls, g_rows, {}, &outside), std::invalid_argument);
 }
+
+}  // namespace test_loss

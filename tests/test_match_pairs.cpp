@@ -13,6 +13,7 @@
 
 #include <msgs/io/match_pairs.hpp>
 
+namespace test_match_pairs {
 using msgs::io::PairImage;
 using msgs::io::window_pairs;
 using Pairs = std::vector<std::pair<std::size_t, std::size_t>>;
@@ -133,3 +134,5 @@ TEST_CASE("local_metres and local_to_gps: degrees to metres east, north and up, 
   const auto back = msgs::io::local_metres(msgs::io::local_to_gps(enu, -33.9, 151.2), -33.9, 151.2);
   for (int i = 0; i < 3; ++i) CHECK(back[std::size_t(i)] == doctest::Approx(enu[std::size_t(i)]).epsilon(1e-9));
 }
+
+}  // namespace test_match_pairs

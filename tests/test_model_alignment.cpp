@@ -15,6 +15,7 @@
 
 #include <msgs/io/model_alignment.hpp>
 
+namespace test_model_alignment {
 using msgs::io::CaptureCentres;
 using msgs::io::RigPose;
 using Cameras = std::vector<std::pair<std::size_t, RigPose>>;
@@ -201,3 +202,5 @@ TEST_CASE("capture_centres: the mean centre of each capture's cameras; captures 
   CHECK((*c[1] - Eigen::Vector3d(2, 0, 0)).norm() < 1e-15);
   CHECK(!c[2]);
 }
+
+}  // namespace test_model_alignment

@@ -13,6 +13,7 @@
 #include "msgs/io/ply.hpp"
 #include "scratch.hpp"
 
+namespace test_ply {
 namespace fs = std::filesystem;
 using msgs::testing::io_error_of;
 using namespace msgs;
@@ -292,3 +293,5 @@ TEST_CASE("bad PLY: missing file, not a PLY, missing properties, gaps in f_rest"
   write_text(dir / "h.ply", "ply\nformat ascii 1.0\nelement vertex 1\n");
   CHECK(io_error_of([&] { (void)inspect_ply(dir / "h.ply"); }).find("end_header") != std::string::npos);
 }
+
+}  // namespace test_ply

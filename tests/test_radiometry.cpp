@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+namespace test_radiometry {
 using namespace msgs::io;
 
 namespace {
@@ -903,3 +904,5 @@ TEST_CASE("radiometry: parameters that cannot be right are errors naming the fil
   r.vignetting_cy = 50;
   CHECK_THROWS_WITH_AS(normalise_image(img, r, "x.tif"), doctest::Contains("vignetting polynomial is"), IoError);
 }
+
+}  // namespace test_radiometry

@@ -12,6 +12,7 @@
 #include <cstring>
 #include <random>
 
+namespace test_rasterize_determinism {
 using namespace msgs;
 using namespace msgs::testing;
 
@@ -307,3 +308,5 @@ TEST_CASE("ties_by_mean and the visible list over many chunks: runs of equal dep
   CHECK(one.binning().tile_list == two.binning().tile_list);
   CHECK(same_render_reversed<kOpt>(m, cam));
 }
+
+}  // namespace test_rasterize_determinism

@@ -12,6 +12,7 @@
 #include <random>
 #include <string>
 
+namespace test_rasterize_gradients {
 using namespace msgs;
 using namespace msgs::testing;
 
@@ -460,3 +461,5 @@ TEST_CASE("float backward agrees with double backward on a crowded scene") {
     CHECK(relative_to_scale(gf.background, gd.background) < 1e-4);
   }
 }
+
+}  // namespace test_rasterize_gradients

@@ -17,6 +17,7 @@
 #include <random>
 #include <string>
 
+namespace test_rasterize_hard_cases {
 using namespace msgs;
 using namespace msgs::testing;
 
@@ -535,3 +536,5 @@ TEST_CASE("vector projection lanes match the scalar projection bit for bit, hard
   check_lanes_match_scalar<false>();
   check_lanes_match_scalar<true>();
 }
+
+}  // namespace test_rasterize_hard_cases

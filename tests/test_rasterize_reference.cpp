@@ -16,6 +16,7 @@
 #include <string>
 #include <utility>
 
+namespace test_rasterize_reference {
 using namespace msgs;
 using namespace msgs::testing;
 
@@ -456,3 +457,5 @@ TEST_CASE("append_set_bits: the set bits of every 16-bit mask, ascending, with t
     }
   }
 }
+
+}  // namespace test_rasterize_reference

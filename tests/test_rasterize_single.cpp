@@ -15,6 +15,7 @@
 #include <random>
 #include <vector>
 
+namespace test_rasterize_single {
 using namespace msgs;
 using namespace msgs::testing;
 
@@ -643,3 +644,5 @@ TEST_CASE_TEMPLATE("the projection writes a whole batch of Gaussians as it write
     CHECK(same_grad);
   }
 }
+
+}  // namespace test_rasterize_single

@@ -15,6 +15,7 @@
 #include "msgs/io/ply.hpp"
 #include "scratch.hpp"
 
+namespace test_regressions {
 namespace fs = std::filesystem;
 using namespace msgs;
 
@@ -249,3 +250,5 @@ TEST_CASE("npy: a shape of 1e5 x 1e5 x 3 with no data fails before allocating") 
                                           bytes({unsigned(wrap.size() & 0xff), unsigned(wrap.size() >> 8)}) + wrap);
   expect_fast_io_error(q, "does not match the shape", [&] { (void)io::read_npy(q); });
 }
+
+}  // namespace test_regressions

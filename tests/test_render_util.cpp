@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+namespace test_render_util {
 namespace fs = std::filesystem;
 using msgs::Image;
 
@@ -689,3 +690,5 @@ TEST_CASE("bad background and empty selections are refused before anything is wr
   CHECK_THROWS_AS(render_dataset(ds, t.models, out3, none), io::IoError);
   CHECK(fs::is_empty(out3));
 }
+
+}  // namespace test_render_util

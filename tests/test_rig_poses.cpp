@@ -13,6 +13,7 @@
 
 #include <msgs/io/rig_poses.hpp>
 
+namespace test_rig_poses {
 using msgs::io::RigPose;
 using Poses = std::vector<std::vector<std::optional<RigPose>>>;
 
@@ -193,3 +194,5 @@ TEST_CASE("rig: nothing registered, a capture with no band registered, no bands"
   CHECK(msgs::io::place_by_rig(still, rig).size() == 1);
   CHECK((centre(*still[1][2]) - centre(*f.truth[0][2])).norm() < 1e-9);
 }
+
+}  // namespace test_rig_poses

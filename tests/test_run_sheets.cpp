@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+namespace test_run_sheets {
 namespace fs = std::filesystem;
 using namespace msgs;
 
@@ -204,3 +205,5 @@ TEST_CASE("write_run_sheets: <run>/sheets with the first N captures, replaced wh
     CHECK(entries(run) == std::set<std::string>{"result.json", "sheets"});
   }
 }
+
+}  // namespace test_run_sheets

@@ -9,6 +9,7 @@
 
 #include "msgs/schedule.hpp"
 
+namespace test_schedule {
 using namespace msgs;
 
 TEST_CASE("ScheduleScale rounds, keeps positive periods positive and zero at zero") {
@@ -222,3 +223,5 @@ TEST_CASE("band sampling with a reshuffle on every pass (the reference's order)"
   for (long long t = 0; t < once.period(); ++t) differs = differs || !(every.at(t + 5 * once.period()) == once.at(t));
   CHECK(differs);
 }
+
+}  // namespace test_schedule

@@ -10,6 +10,7 @@
 
 #include <msgs/io/similarity.hpp>
 
+namespace test_similarity {
 using msgs::io::fit_similarity;
 
 namespace {
@@ -64,3 +65,5 @@ TEST_CASE("fit_similarity: too few points, different sizes and no spread are ref
   const std::vector<Eigen::Vector3d> same(4, Eigen::Vector3d(1, 2, 3));
   CHECK_THROWS_AS(fit_similarity(same, std::vector<Eigen::Vector3d>(src.begin(), src.begin() + 4)), std::invalid_argument);
 }
+
+}  // namespace test_similarity

@@ -25,6 +25,7 @@
 #include <variant>
 #include <vector>
 
+namespace test_snapshot {
 namespace fs = std::filesystem;
 using namespace msgs;
 
@@ -221,3 +222,5 @@ TEST_CASE("a snapshot handed out never changes; StepView gives the model back on
   CHECK(store.latest()->models[0].model.get() == s2);
   CHECK(store.latest()->models[0].model->size() == 6);
 }
+
+}  // namespace test_snapshot

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+namespace test_strategy {
 using namespace msgs;
 
 namespace {
@@ -301,3 +302,5 @@ TEST_CASE("the gsplat/3DGS densification preset is the base the modifiers change
   CHECK(parse_densify_preset("msgs") == DensifyPreset::MultiSpectral);
   CHECK_THROWS_AS(parse_densify_preset("fast"), std::invalid_argument);
 }
+
+}  // namespace test_strategy

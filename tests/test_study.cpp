@@ -28,6 +28,7 @@
 #include "../examples/report.hpp"  // the result.json writer of `msgs train`, which collect must read
 #include "../examples/train_options.hpp"  // the preset and the switches `msgs train` takes
 
+namespace test_study {
 using namespace msgs;
 using namespace msgs::study;
 namespace fs = std::filesystem;
@@ -517,3 +518,5 @@ TEST_CASE("train options: each departure of the fast preset can be switched on i
   CHECK(config_of({"--spectral-init", "on"}).train.spectral_colour_init);
   CHECK_THROWS_AS(config_of({"--spectral-init", "yes"}), cli::UsageError);
 }
+
+}  // namespace test_study

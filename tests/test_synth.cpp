@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+namespace test_synth {
 namespace fs = std::filesystem;
 using namespace msgs::synth;
 using Json = nlohmann::json;
@@ -563,3 +564,5 @@ TEST_CASE("synth: the dataset loader reads the generated dataset back") {
     CHECK(img.width == (s.preset.ms_width + 1) / 2);
   }
 }
+
+}  // namespace test_synth

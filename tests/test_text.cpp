@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+namespace test_text {
 using msgs::Image;
 
 namespace {
@@ -180,3 +181,5 @@ TEST_CASE("default_text: the shared renderer, made once") {
   CHECK(a == nullptr);
 #endif
 }
+
+}  // namespace test_text

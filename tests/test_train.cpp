@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+namespace test_train {
 namespace fs = std::filesystem;
 using namespace msgs;
 
@@ -433,3 +434,5 @@ TEST_CASE("fused colour step: the same bits as storing the colour gradients, den
     CHECK(sa.steps.sh == sb.steps.sh);
   }
 }
+
+}  // namespace test_train

@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+namespace test_train_parity {
 namespace fs = std::filesystem;
 using namespace msgs;
 
@@ -217,3 +218,5 @@ TEST_CASE("presets: reference is TrainOptions{}, fast names and applies its depa
   CHECK_THROWS_AS(parse_preset("quick"), std::invalid_argument);
   CHECK_THROWS_AS(fast_lr_sh_dc(0.0), std::invalid_argument);
 }
+
+}  // namespace test_train_parity

@@ -19,6 +19,7 @@
 #include <string>
 #include <vector>
 
+namespace test_train_run {
 namespace fs = std::filesystem;
 using namespace msgs;
 
@@ -294,3 +295,5 @@ TEST_CASE("Geometry band: Split from a narrow band, SpecDelay trains the geometr
     CHECK(std::isfinite(before[2]));
   }
 }
+
+}  // namespace test_train_run

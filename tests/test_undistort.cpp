@@ -7,6 +7,7 @@
 
 #include "msgs/io/undistort.hpp"
 
+namespace test_undistort {
 using namespace msgs;
 using namespace msgs::io;
 
@@ -169,3 +170,5 @@ TEST_CASE("size mismatch between image and camera is an error") {
   Image<float> img(10, 10, 1);
   CHECK_THROWS_AS((void)undistort_image(img, test_camera(), Distortion{}), IoError);
 }
+
+}  // namespace test_undistort

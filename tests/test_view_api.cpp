@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+namespace test_view_api {
 using namespace msgs;
 using view::Params;
 using view::Query;
@@ -411,3 +412,5 @@ TEST_CASE("dataset frames: ground truth per mode, capture lookups and size check
   for (const auto& m : k["modes"])
     if (m["id"] == "ndvi") CHECK(m["available"] == false);
 }
+
+}  // namespace test_view_api

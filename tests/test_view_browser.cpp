@@ -34,6 +34,7 @@
 #include <string>
 #include <vector>
 
+namespace test_view_browser {
 namespace fs = std::filesystem;
 
 namespace {
@@ -179,3 +180,5 @@ TEST_CASE("browser: a deep link to a dataset camera and band shows what msgs ren
   MESSAGE("browser test: " << std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count()
                            << " s");
 }
+
+}  // namespace test_view_browser

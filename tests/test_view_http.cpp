@@ -34,6 +34,7 @@
 // After Eigen (via the msgs headers): httplib includes <resolv.h>, whose `_res` macro breaks Eigen.
 #include <httplib.h>
 
+namespace test_view_http {
 namespace fs = std::filesystem;
 
 namespace {
@@ -306,3 +307,5 @@ TEST_CASE("msgs train --view: live snapshots of every band model, served until C
 
   CHECK(server.stop(SIGINT) == 0);  // Ctrl-C ends the viewer after a finished run
 }
+
+}  // namespace test_view_http
