@@ -13,6 +13,7 @@
 #include "render_dispatch.hpp"
 #include "report.hpp"
 
+namespace cmd_eval {  // this file's own names: the tool's files compile in unity groups
 namespace {
 
 constexpr const char* kUsage =
@@ -124,5 +125,6 @@ int run_eval(const std::vector<std::string>& argv) {
 }
 
 }  // namespace
+}  // namespace cmd_eval
 
-MSGS_COMMAND("eval", "Per-band PSNR / SSIM of a model on the eval split, with contact sheets", run_eval);
+MSGS_COMMAND("eval", "Per-band PSNR / SSIM of a model on the eval split, with contact sheets", cmd_eval::run_eval);

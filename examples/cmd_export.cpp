@@ -13,6 +13,7 @@
 #include "commands.hpp"
 #include "export_index.hpp"
 
+namespace cmd_export {  // this file's own names: the tool's files compile in unity groups
 namespace {
 
 constexpr const char* kUsage =
@@ -154,5 +155,6 @@ int run_export(const std::vector<std::string>& argv) {
 }
 
 }  // namespace
+}  // namespace cmd_export
 
-MSGS_COMMAND("export", "Write a band, CIR or index of a model as .ply / .splat / .spz for other viewers", run_export);
+MSGS_COMMAND("export", "Write a band, CIR or index of a model as .ply / .splat / .spz for other viewers", cmd_export::run_export);

@@ -42,6 +42,7 @@
 #include "commands.hpp"
 #include "subprocess.hpp"
 
+namespace cmd_import {  // this file's own names: the tool's files compile in unity groups
 namespace {
 
 namespace fs = std::filesystem;
@@ -1890,5 +1891,6 @@ int run_import(const std::vector<std::string>& argv) {
 }
 
 }  // namespace
+}  // namespace cmd_import
 
-MSGS_COMMAND("import", "Turn a folder of raw multi-band captures into the dataset layout (COLMAP + exiv2)", run_import);
+MSGS_COMMAND("import", "Turn a folder of raw multi-band captures into the dataset layout (COLMAP + exiv2)", cmd_import::run_import);

@@ -12,6 +12,7 @@
 #include "data_options.hpp"
 #include "render_dispatch.hpp"
 
+namespace cmd_render {  // this file's own names: the tool's files compile in unity groups
 namespace {
 
 constexpr const char* kUsage =
@@ -115,5 +116,6 @@ int run_render(const std::vector<std::string>& argv) {
 }
 
 }  // namespace
+}  // namespace cmd_render
 
-MSGS_COMMAND("render", "Render a model at the dataset's cameras, plus CIR / NDVI / NDRE maps", run_render);
+MSGS_COMMAND("render", "Render a model at the dataset's cameras, plus CIR / NDVI / NDRE maps", cmd_render::run_render);

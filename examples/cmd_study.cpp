@@ -31,6 +31,7 @@
 #include "report.hpp"
 #include "run_sheets.hpp"
 
+namespace cmd_study {  // this file's own names: the tool's files compile in unity groups
 namespace {
 
 namespace fs = std::filesystem;
@@ -342,5 +343,6 @@ int run_study(const std::vector<std::string>& argv) {
 }
 
 }  // namespace
+}  // namespace cmd_study
 
-MSGS_COMMAND("study", "Ablation, cross-talk and accuracy-vs-time studies over many runs; job files; collect", run_study);
+MSGS_COMMAND("study", "Ablation, cross-talk and accuracy-vs-time studies over many runs; job files; collect", cmd_study::run_study);

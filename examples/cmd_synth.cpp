@@ -11,6 +11,7 @@
 
 #include "commands.hpp"
 
+namespace cmd_synth {  // this file's own names: the tool's files compile in unity groups
 namespace {
 
 constexpr const char* kUsage =
@@ -159,5 +160,6 @@ int run_synth(const std::vector<std::string>& argv) {
 }
 
 }  // namespace
+}  // namespace cmd_synth
 
-MSGS_COMMAND("synth", "Generate a ray-traced synthetic multi-spectral dataset", run_synth);
+MSGS_COMMAND("synth", "Generate a ray-traced synthetic multi-spectral dataset", cmd_synth::run_synth);

@@ -22,6 +22,7 @@
 #include "run_sheets.hpp"
 #include "train_options.hpp"
 
+namespace cmd_train {  // this file's own names: the tool's files compile in unity groups
 namespace {
 
 constexpr const char* kUsage =
@@ -239,5 +240,6 @@ int run_train(const std::vector<std::string>& argv) {
 }
 
 }  // namespace
+}  // namespace cmd_train
 
-MSGS_COMMAND("train", "Train a strategy (separate, split, joint+...) on a dataset", run_train);
+MSGS_COMMAND("train", "Train a strategy (separate, split, joint+...) on a dataset", cmd_train::run_train);

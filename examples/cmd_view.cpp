@@ -20,6 +20,7 @@
 #include "view_api.hpp"
 #include "view_server.hpp"
 
+namespace cmd_view {  // this file's own names: the tool's files compile in unity groups
 namespace {
 
 constexpr const char* kUsage =
@@ -124,6 +125,7 @@ int run_view(const std::vector<std::string>& argv) {
 }
 
 }  // namespace
+}  // namespace cmd_view
 
 MSGS_COMMAND("view", "Interactive viewer in the browser: any band, RGB, CIR, spectral indices, dataset cameras",
-             run_view);
+             cmd_view::run_view);

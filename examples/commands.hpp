@@ -122,4 +122,4 @@ inline std::vector<std::string> split_list(const std::string& s) {
 #define MSGS_CONCAT(a, b) MSGS_CONCAT_INNER(a, b)
 /// Register a subcommand: MSGS_COMMAND("render", "Render a model", run_render);
 #define MSGS_COMMAND(name, summary, fn) \
-  static ::msgs::cli::Registrar MSGS_CONCAT(msgs_cmd_registrar_, __LINE__)(name, summary, fn)
+  static ::msgs::cli::Registrar MSGS_CONCAT(msgs_cmd_registrar_, __COUNTER__)(name, summary, fn)
