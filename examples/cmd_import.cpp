@@ -29,6 +29,7 @@
 #include <msgs/io/colmap.hpp>
 #include <msgs/io/dataset.hpp>
 #include <msgs/io/file.hpp>
+#include <msgs/io/frame_json.hpp>
 #include <msgs/io/image_io.hpp>
 #include <msgs/io/light_sensor_heading.hpp>
 #include <msgs/io/match_pairs.hpp>
@@ -688,14 +689,6 @@ msgs::Image<float> sift_copy(const msgs::Image<float>& img) {
   const float k = b > a ? 1.0f / (b - a) : 1.0f;
   for (float& x : out.data) x = std::clamp((x - a) * k, 0.0f, 1.0f);
   return out;
-}
-
-/// Float to the shortest double that reads back as the same float (135.365265, not 135.36526489257813).
-double tidy(float v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.9g", double(v));
-  const double d = std::strtod(buf, nullptr);
-  return d == 0.0 ? 0.0 : d;  // no "-0.0"
 }
 
 nlohmann::ordered_json opt_number(const std::optional<double>& v) {
@@ -1775,10 +1768,10 @@ int run_import(const std::vector<std::string>& argv) {
         if (gf->second->contains(key)) f[key] = (*gf->second)[key];
     } else {
       const msgs::io::ColmapImage& im = *reg->second;
-      f["fl_x"] = tidy(im.camera.fx);
-      f["fl_y"] = tidy(im.camera.fy);
-      f["cx"] = tidy(im.camera.cx);
-      f["cy"] = tidy(im.camera.cy);
+      f["fl_x"] = msgs::io::json_float(im.camera.fx);
+      f["fl_y"] = msgs::io::json_float(im.camera.fy);
+      f["cx"] = msgs::io::json_float(im.camera.cx);
+      f["cy"] = msgs::io::json_float(im.camera.cy);
       f["w"] = im.camera.width;
       f["h"] = im.camera.height;
       using M = msgs::io::Distortion::Model;
@@ -1789,14 +1782,7 @@ int run_import(const std::vector<std::string>& argv) {
       f["k4"] = im.dist.k4;
       f["p1"] = im.dist.p1;
       f["p2"] = im.dist.p2;
-      const Eigen::Matrix4f c2w = im.camera.opengl_c2w();
-      nlohmann::ordered_json rows = nlohmann::ordered_json::array();
-      for (int r = 0; r < 4; ++r) {
-        nlohmann::ordered_json row = nlohmann::ordered_json::array();
-        for (int c = 0; c < 4; ++c) row.push_back(tidy(c2w(r, c)));
-        rows.push_back(row);
-      }
-      f["transform_matrix"] = rows;
+      f["transform_matrix"] = msgs::io::transform_matrix_json(im.camera);
       const auto from = rig.from.find(it.colmap_name);
       const auto carried = merged.from.find(it.colmap_name);
       f["pose"] = from != rig.from.end()        ? "rig from " + from->second

@@ -16,6 +16,7 @@
 #include <nlohmann/json.hpp>
 
 #include "../io/file.hpp"
+#include "../io/frame_json.hpp"
 #include "../io/image_io.hpp"
 #include "render.hpp"
 #include "scene.hpp"
@@ -55,31 +56,15 @@ inline std::string frame_file_name(Band b, int capture) {
 
 namespace detail {
 
-/// Float to the shortest double that reads back as the same float, so the JSON shows
-/// 0.300000012 rather than 0.30000001192092896 and loaders recover the exact camera.
-inline double tidy(float v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.9g", double(v));
-  const double d = std::strtod(buf, nullptr);
-  return d == 0.0 ? 0.0 : d;  // no "-0.0" in the files
-}
-
 inline nlohmann::ordered_json frame_json(const Camera<float>& cam, Band b, int capture) {
   nlohmann::ordered_json f;
   f["file_path"] = "images/" + frame_file_name(b, capture);
-  const Eigen::Matrix4f m = cam.opengl_c2w();
-  nlohmann::ordered_json rows = nlohmann::ordered_json::array();
-  for (int r = 0; r < 4; ++r) {
-    nlohmann::ordered_json row = nlohmann::ordered_json::array();
-    for (int c = 0; c < 4; ++c) row.push_back(tidy(m(r, c)));
-    rows.push_back(row);
-  }
-  f["transform_matrix"] = rows;
+  f["transform_matrix"] = io::transform_matrix_json(cam);
   f["mm_channel"] = std::string(band_name(b));
-  f["fl_x"] = tidy(cam.fx);
-  f["fl_y"] = tidy(cam.fy);
-  f["cx"] = tidy(cam.cx);
-  f["cy"] = tidy(cam.cy);
+  f["fl_x"] = io::json_float(cam.fx);
+  f["fl_y"] = io::json_float(cam.fy);
+  f["cx"] = io::json_float(cam.cx);
+  f["cy"] = io::json_float(cam.cy);
   f["w"] = cam.width;
   f["h"] = cam.height;
   for (const char* k : {"k1", "k2", "k3", "k4", "p1", "p2"}) f[k] = 0.0;
