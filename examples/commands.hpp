@@ -120,6 +120,7 @@ inline std::vector<std::string> split_list(const std::string& s) {
 
 #define MSGS_CONCAT_INNER(a, b) a##b
 #define MSGS_CONCAT(a, b) MSGS_CONCAT_INNER(a, b)
-/// Register a subcommand: MSGS_COMMAND("render", "Render a model", run_render);
+/// Register a subcommand: MSGS_COMMAND("render", "Render a model", run_render); the registrar is
+/// named by __COUNTER__, not __LINE__, since the files of a unity group are one unit.
 #define MSGS_COMMAND(name, summary, fn) \
   static ::msgs::cli::Registrar MSGS_CONCAT(msgs_cmd_registrar_, __COUNTER__)(name, summary, fn)
