@@ -1768,12 +1768,7 @@ int run_import(const std::vector<std::string>& argv) {
         if (gf->second->contains(key)) f[key] = (*gf->second)[key];
     } else {
       const msgs::io::ColmapImage& im = *reg->second;
-      f["fl_x"] = msgs::io::json_float(im.camera.fx);
-      f["fl_y"] = msgs::io::json_float(im.camera.fy);
-      f["cx"] = msgs::io::json_float(im.camera.cx);
-      f["cy"] = msgs::io::json_float(im.camera.cy);
-      f["w"] = im.camera.width;
-      f["h"] = im.camera.height;
+      msgs::io::write_intrinsics_json(f, im.camera);
       using M = msgs::io::Distortion::Model;
       f["camera_model"] = im.dist.model == M::none ? "PINHOLE" : im.dist.model == M::fisheye ? "OPENCV_FISHEYE" : "OPENCV";
       f["k1"] = im.dist.k1;

@@ -22,6 +22,16 @@ inline double json_float(float v) {
   return d == 0.0 ? 0.0 : d;
 }
 
+/// A frame's intrinsics: "fl_x", "fl_y", "cx", "cy", "w" and "h", in that order.
+inline void write_intrinsics_json(nlohmann::ordered_json& frame, const Camera<float>& cam) {
+  frame["fl_x"] = json_float(cam.fx);
+  frame["fl_y"] = json_float(cam.fy);
+  frame["cx"] = json_float(cam.cx);
+  frame["cy"] = json_float(cam.cy);
+  frame["w"] = cam.width;
+  frame["h"] = cam.height;
+}
+
 /// A frame's "transform_matrix": the camera's pose as an OpenGL camera-to-world matrix, row by row.
 inline nlohmann::ordered_json transform_matrix_json(const Camera<float>& cam) {
   const Eigen::Matrix4f m = cam.opengl_c2w();

@@ -61,12 +61,7 @@ inline nlohmann::ordered_json frame_json(const Camera<float>& cam, Band b, int c
   f["file_path"] = "images/" + frame_file_name(b, capture);
   f["transform_matrix"] = io::transform_matrix_json(cam);
   f["mm_channel"] = std::string(band_name(b));
-  f["fl_x"] = io::json_float(cam.fx);
-  f["fl_y"] = io::json_float(cam.fy);
-  f["cx"] = io::json_float(cam.cx);
-  f["cy"] = io::json_float(cam.cy);
-  f["w"] = cam.width;
-  f["h"] = cam.height;
+  io::write_intrinsics_json(f, cam);
   for (const char* k : {"k1", "k2", "k3", "k4", "p1", "p2"}) f[k] = 0.0;
   f["camera_model"] = "OPENCV";
   return f;
