@@ -124,9 +124,10 @@ constexpr const char* kUsage =
     "                      the captures of a calibration panel the camera marked and read:\n"
     "                      CalibrationPicture 2 with the panel's Albedo and ReflectArea; one\n"
     "                      irradiance per band, the mean over the panel's area of the corrected\n"
-    "                      DN / albedo), panel+dls (the light sensor, MicaSense's DLS 2 or DJI's\n"
-    "                      sunlight sensor, follows the light through the flight, the panel sets\n"
-    "                      its level) or sun-sensor (each image divided by its light sensor's\n"
+    "                      DN / albedo), panel+dls (the light sensor, MicaSense's DLS 2, DJI's\n"
+    "                      sunlight sensor or the Parrot Sequoia's sunshine sensor, follows the\n"
+    "                      light through the flight, the panel sets its level in each band) or\n"
+    "                      sun-sensor (each image divided by its light sensor's\n"
     "                      reading and multiplied by the band camera's calibration, DJI's\n"
     "                      SensorGainAdjustment or MicaSense's a1, as DJI's guides compute NDVI;\n"
     "                      then one scale for all bands, the brightest value of any band 1:\n"
@@ -1391,8 +1392,9 @@ int run_import(const std::vector<std::string>& argv) {
                                                                                : "",
                    " in every image of band ", band, by_panel ? " and in its panel pictures" : "", ":", what,
                    "\n  msgs computes reflectance from MicaSense's DLS 2 (reflectance), from a light sensor up to",
-                   " one factor for all bands (sun-sensor: MicaSense, DJI) and from calibration panels (panel,",
-                   " panel+dls); use --radiometry auto for relative radiance"));
+                   " one factor for all bands (sun-sensor: MicaSense, DJI) and from calibration panels (panel;",
+                   " panel+dls, where the light sensor follows the light: MicaSense, DJI and the Parrot Sequoia's",
+                   " sunshine sensor); use --radiometry auto for relative radiance"));
         }
         std::printf("  warning: %s: corrections left out for the whole band (%s):%s\n", band.c_str(),
                     steps.any() ? "the others are applied" : "stored values kept", what.c_str());
@@ -1809,6 +1811,7 @@ int run_import(const std::vector<std::string>& argv) {
         rad["irradiance_w_m2_nm"] = msgs::io::reflectance_irradiance(it.rad);
       }
       if (s.irradiance) rad[it.meta.irradiance_si ? "light_sensor_w_m2_nm" : "light_sensor"] = it.rad.irradiance;
+      if (s.irradiance && it.meta.light_sensor_readings > 0) rad["light_sensor_readings"] = it.meta.light_sensor_readings;
       if (s.irradiance && it.heading_factor) rad["light_sensor_heading_factor"] = *it.heading_factor;
       if (s.irradiance && it.meta.sun_elevation_deg) rad["sun_elevation_deg"] = *it.meta.sun_elevation_deg;
       if (s.irradiance && it.meta.sun_sensor_angle_deg) rad["sun_sensor_angle_deg"] = *it.meta.sun_sensor_angle_deg;

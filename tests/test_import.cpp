@@ -440,6 +440,13 @@ TEST_CASE("synth --raw: deterministic bytes, camera file names, metadata exiv2 r
   const msgs::io::CaptureMeta sm = msgs::io::parse_capture_meta(slurp(dir / "exiv2_seq.txt"), q);
   REQUIRE(sm.has_vignetting());
   CHECK(sm.source.at("vignetting") == "Xmp.Camera.VignettingPolynomial2D");
+  // The sunshine sensor's list and calibration, through exiv2: the mean of the last second's six
+  // readings (the four before it read the previous capture's light) is this capture's light.
+  REQUIRE_MESSAGE(sm.irradiance, sm.irradiance_problem);
+  CHECK(sm.source.at("irradiance") == "Xmp.Camera.IrradianceList");
+  CHECK(sm.light_sensor_readings == 6);
+  const double light0 = msgs::synth::raw_light(seq.seed, 0, seq.light_variation);
+  CHECK(*sm.irradiance == doctest::Approx(msgs::synth::sequoia_sunshine_reading(seq_band, light0)).epsilon(2e-3));
   const auto raw_q = msgs::io::read_image(q);
   const msgs::io::BandPlan plan = msgs::io::plan_band({sm}, {q});
   CHECK(plan.steps.vignetting);
@@ -470,6 +477,26 @@ TEST_CASE("synth --raw: deterministic bytes, camera file names, metadata exiv2 r
   MESSAGE("Sequoia corner/centre against the truth: raw " << raw_fall << ", normalised " << norm_fall);
   CHECK(raw_fall < 0.85);
   CHECK(norm_fall == doctest::Approx(1.0).epsilon(0.03));
+}
+
+TEST_CASE("synth --raw sequoia: the sunshine sensor's tags give back its light, the last second only") {
+  // sequoia_sunshine_list: the first four readings under the previous capture's light, the last six
+  // under this one's, alternating gains; the NIR band's next-to-last reading saturated.
+  const auto bands = msgs::synth::raw_bands("sequoia");
+  const auto rows =
+      msgs::io::sunshine_calibration(*msgs::io::detail::parse_number_list(msgs::synth::sequoia_sunshine_calibration()));
+  REQUIRE(rows);
+  for (int bi = 0; bi < 4; ++bi) {
+    CAPTURE(bi);
+    const auto& b = bands[std::size_t(bi)];
+    const msgs::io::SunshineList l =
+        msgs::io::parse_sunshine_list(msgs::synth::sequoia_sunshine_list(b, bi, 36002, 1.2, 0.7, {}));
+    REQUIRE_MESSAGE(l.problem.empty(), l.problem);
+    REQUIRE(l.readings.size() == 10);
+    const msgs::io::SunshineIrradiance e = msgs::io::sunshine_irradiance(l.readings, *rows);
+    CHECK(e.readings == (bi == 3 ? 5 : 6));
+    CHECK(e.irradiance == doctest::Approx(msgs::synth::sequoia_sunshine_reading(b, 1.2)).epsilon(2e-3));
+  }
 }
 
 TEST_CASE("msgs import: junk names and an existing --out are refused, nothing left behind") {
@@ -1119,6 +1146,53 @@ TEST_CASE("msgs import: a DJI flight's sunlight sensor, with the panel pictures 
     CHECK(!fs::exists(dir / out));
     CHECK(!leftovers(dir, out));
   }
+}
+
+TEST_CASE("msgs import --radiometry panel+dls: a Parrot Sequoia's sunshine sensor follows the light") {
+  // Sunlight that changes by up to 25% from capture to capture, a sunshine sensor that reads 10%
+  // high, and a panel capture after the flight, listed in panels.json (a Sequoia marks none).
+  msgs::synth::RawOptions opt = small_micasense_set();
+  opt.camera = "sequoia";
+  opt.light_variation = 0.25;
+  opt.dls_bias = 0.1;
+  opt.panel_captures = 1;
+  const auto dir_or = truth_case("sequoia_sun", "a Sequoia's sunshine sensor", opt);
+  if (!dir_or) return;
+  const fs::path& dir = *dir_or;
+  const std::string list = " --panels '" + (dir / "raw" / "panels.json").string() + "'";
+  const msgs::synth::SynthScene scene = msgs::synth::make_scene(raw_set_preset(opt), opt.seed);
+
+  // The panel sets each band's level, the sunshine sensor follows the light: the scene's
+  // reflectances back, in every band image.
+  const auto ok = import_ok(dir, "ds", "--radiometry panel+dls" + list + truth_poses(dir));
+  REQUIRE_MESSAGE(ok.first == 0, ok.second);
+  CHECK(!leftovers(dir, "ds"));
+  const Json tf = Json::parse(slurp(dir / "ds" / "transforms.json"));
+  REQUIRE(tf["frames"].size() == 25);
+  REQUIRE(tf["msgs_import"]["calibration_panels"].size() == 4);
+  int checked = 0;
+  for (const auto& f : tf["frames"]) {
+    if (f["mm_channel"] == "D") continue;
+    ++checked;
+    const std::string src = f["source"];
+    const auto& rad = f["radiometry"];
+    CHECK(rad["metadata_keys"]["irradiance"] == "Xmp.Camera.IrradianceList");
+    CHECK(rad["light_sensor"].get<double>() > 0);
+    CHECK(rad["light_sensor_readings"] == (src.find("_NIR") != std::string::npos ? 5 : 6));
+    CHECK_MESSAGE(median_ratio_to_truth(dir, dir / "ds", f, scene, opt) == doctest::Approx(1.0).epsilon(0.01).scale(0), src);
+  }
+  CHECK(checked == 20);
+
+  // sun-sensor: a Sequoia writes no band calibration, so its bands' ratios are not reflectance's;
+  // refused before anything is written, pointing to panel+dls.
+  const auto sun = import_raw(dir, "sun", "--radiometry sun-sensor" + list + truth_poses(dir));
+  CHECK(sun.first == 1);
+  CHECK_MESSAGE(sun.second.find("band calibration (DJI SensorGainAdjustment, MicaSense RadiometricCalibration) missing in "
+                                "5 of 5 files") != std::string::npos,
+                sun.second);
+  CHECK_MESSAGE(sun.second.find("the Parrot Sequoia's sunshine sensor") != std::string::npos, sun.second);
+  CHECK(!fs::exists(dir / "sun"));
+  CHECK(!leftovers(dir, "sun"));
 }
 
 TEST_CASE("msgs import: a light sensor that reads higher on one heading is reported, and divided out on request") {

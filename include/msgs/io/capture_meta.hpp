@@ -34,7 +34,10 @@
 //                 an Altum before 1.2.3 (Exif.Image.Model, Exif.Image.Software), whose firmware
 //                 wrote it wrongly; in DJI files (Mavic 3M, P4 Multispectral) the sunlight sensor's
 //                 reading of this band, in its own units: Xmp.drone-dji.Irradiance, else
-//                 Xmp.Camera.Irradiance (DJI's guides: "solar irradiance value after compensation")
+//                 Xmp.Camera.Irradiance (DJI's guides: "solar irradiance value after compensation");
+//                 a Parrot Sequoia's sunshine sensor, in its own units: Xmp.Camera.IrradianceList
+//                 with the gains of Xmp.Camera.IrradianceCalibrationMeasurement
+//                 (msgs/io/sunshine_sensor.hpp)
 //   levelled      where a MicaSense file has no HorizontalIrradiance, or one its firmware wrote
 //                 wrongly, the level-ground irradiance is computed as MicaSense's library does
 //                 (msgs/io/light_sensor_tilt.hpp), with the sun's place from the position and the
@@ -82,6 +85,7 @@
 #include "msgs/io/error.hpp"
 #include "msgs/io/light_sensor_tilt.hpp"
 #include "msgs/io/sun_position.hpp"
+#include "msgs/io/sunshine_sensor.hpp"
 
 namespace msgs::io {
 
@@ -118,6 +122,8 @@ struct CaptureMeta {
   /// DJI's SensorGainAdjustment: (DN - black) / 2^bits / (exposure x gain) x this / the sunlight
   /// sensor's reading is reflectance up to one factor common to every band (DJI's guides).
   std::optional<double> gain_adjustment;
+  /// How many readings `irradiance` is the mean of (a Parrot Sequoia's sunshine sensor; 0 otherwise).
+  int light_sensor_readings = 0;
   /// Why an irradiance the file holds was not taken (a firmware known to write it wrongly, a
   /// reading that could not be levelled).
   std::string irradiance_problem;
@@ -179,7 +185,8 @@ inline const std::vector<std::string>& exiv2_metadata_keys() {
       "Xmp.drone-dji.Irradiance", "Xmp.Camera.Irradiance", "Xmp.drone-dji.SensorGainAdjustment",
       "Exif.Photo.DateTimeOriginal", "Exif.Photo.SubSecTimeOriginal", "Xmp.exif.DateTimeOriginal",
       "Exif.Photo.SubSecTime", "Xmp.DLS.DirectIrradiance", "Xmp.DLS.ScatteredIrradiance",
-      "Xmp.DLS.SpectralIrradiance", "Xmp.DLS.Yaw", "Xmp.DLS.Pitch", "Xmp.DLS.Roll", "Xmp.drone-dji.FlightYawDegree"};
+      "Xmp.DLS.SpectralIrradiance", "Xmp.DLS.Yaw", "Xmp.DLS.Pitch", "Xmp.DLS.Roll", "Xmp.drone-dji.FlightYawDegree",
+      "Xmp.Camera.IrradianceList", "Xmp.Camera.IrradianceCalibrationMeasurement"};
   return keys;
 }
 
@@ -520,6 +527,36 @@ inline void level_light_sensor(const std::map<std::string, std::string>& kv, con
   m.irradiance_problem.clear();
 }
 
+/// A Parrot Sequoia's sunshine sensor (msgs/io/sunshine_sensor.hpp): sets m.irradiance, in the
+/// sensor's own units, from the IrradianceList `list` and the gains of `calibration`, or says in
+/// m.irradiance_problem why not. Never an error: a list msgs cannot read leaves the modes that need
+/// the reading to refuse the band, and the others unaffected.
+inline void read_sunshine_sensor(const std::pair<const std::string, std::string>& list,
+                                 const std::pair<const std::string, std::string>* calibration, CaptureMeta& m) {
+  const SunshineList readings = parse_sunshine_list(list.second);
+  if (!readings.problem.empty()) {
+    m.irradiance_problem = cat(list.first, ": ", readings.problem);
+    return;
+  }
+  const auto values = calibration ? detail::parse_number_list(calibration->second) : std::nullopt;
+  const auto rows = values ? sunshine_calibration(*values) : std::nullopt;
+  if (!rows) {
+    m.irradiance_problem =
+        calibration ? cat(calibration->first, ": value '", calibration->second.substr(0, 80),
+                          "' is not rows of gain index, integration time, CH0 and CH1")
+                    : "no Xmp.Camera.IrradianceCalibrationMeasurement, which gives the sunshine sensor's gains";
+    return;
+  }
+  const SunshineIrradiance e = sunshine_irradiance(readings.readings, *rows);
+  if (!e.problem.empty()) {
+    m.irradiance_problem = cat(list.first, ": ", e.problem);
+    return;
+  }
+  m.irradiance = e.irradiance;
+  m.light_sensor_readings = e.readings;
+  m.source["irradiance"] = list.first;
+}
+
 /// Turn the key -> value map of one file into metadata. `file` names the image in errors.
 /// Throws IoError for a recognised key whose value is malformed (not a number where one is
 /// expected, a vignetting centre without two numbers, a non-positive exposure ...).
@@ -687,6 +724,8 @@ inline CaptureMeta capture_meta_from_exiv2(const std::map<std::string, std::stri
       }
     }
   }
+  if (!m.irradiance && m.irradiance_problem.empty())
+    if (auto e = first({"Xmp.Camera.IrradianceList"})) read_sunshine_sensor(*e, first({"Xmp.Camera.IrradianceCalibrationMeasurement"}), m);
   if (auto e = first({"Xmp.drone-dji.SensorGainAdjustment"})) {
     m.gain_adjustment = number(*e, "a gain adjustment factor (> 0)", true);
     m.source["gain_adjustment"] = e->first;

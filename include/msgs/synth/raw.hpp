@@ -42,7 +42,9 @@
 //              camera: no black level (DN = radiance x ...), and the vignetting as a 2-D fall-off
 //              polynomial in x / width and y / height (Camera:VignettingPolynomial2D, its exponents
 //              in Camera:VignettingPolynomial2DName); exposure, ISO, wavelengths and focal data as
-//              for MicaSense.
+//              for MicaSense; the sunshine sensor's readings of the band since the previous capture
+//              and its gains' calibration, Camera:IrradianceList and
+//              Camera:IrradianceCalibrationMeasurement (sequoia_sunshine_list).
 //   All three carry the capture's position (the RGB mount's centre as metres east, north and up
 //   of 51.98 N, 5.66 E, 20 m): DJI as drone-dji:GpsLatitude/GpsLongitude/AbsoluteAltitude, the
 //   others as exif:GPSLatitude/GPSLongitude ("DD,MM.mmmmmmK") and exif:GPSAltitude.
@@ -100,7 +102,8 @@ struct RawOptions {
   int captures = 0;   ///< number of captures (0: the preset's)
   int width = 0;      ///< multispectral image width (0: the preset's); height 3/4 of it, RGB 1.5x
   /// The sunlight of each capture is 1 +- this (uniform, the same for every band of a capture),
-  /// as under passing clouds; 0 keeps it steady. The light sensors of MicaSense and DJI record it.
+  /// as under passing clouds; 0 keeps it steady. The light sensors of MicaSense, DJI and the
+  /// Sequoia record it.
   double light_variation = 0.0;
   /// The light sensor reads (1 + this) x the sunlight (a calibration or mounting error, which a
   /// calibration panel takes out); -0.5 .. 1.
@@ -277,6 +280,58 @@ inline double dji_gain_adjustment(const RawBand& b) {
 /// What DJI's reflectance formula gives for a surface of reflectance 1 in the synthetic DJI sets
 /// (the unknown factor common to all bands in DJI's guides).
 inline constexpr double kDjiReflectanceFactor = 0.01;
+
+/// The gains of the raw sets' Parrot Sequoia sunshine sensor at gain index 0 .. 3 (a real unit's
+/// ratios, rounded), and its counts per millisecond at gain 1 under the factory calibration's light.
+inline constexpr double kSequoiaSunshineGain[4] = {1.0, 24.8, 410.0, 6600.0};
+inline constexpr double kSequoiaSunshineCalibrationRate = 0.055;
+
+/// Xmp.Camera.IrradianceCalibrationMeasurement of the raw sets' Sequoia: every gain index for
+/// 600 ms under the calibration's light, the highest saturated, as a real unit's.
+inline std::string sequoia_sunshine_calibration() {
+  std::string s;
+  for (int g = 0; g < 4; ++g) {
+    const double ch0 = std::min(65535.0, std::round(kSequoiaSunshineCalibrationRate * kSequoiaSunshineGain[g] * 600.0));
+    const double ch1 = std::min(65535.0, std::round(0.5 * kSequoiaSunshineCalibrationRate * kSequoiaSunshineGain[g] * 600.0));
+    s += io::cat(g ? "," : "", g, ",600,", ch0, ",", ch1);
+  }
+  return s;
+}
+
+/// The raw sets' Sequoia sunshine sensor's reading of band `b` (file order `band_index`) under the
+/// sunlight `light` (relative to the steady sky, the sensor's own error included) relative to the
+/// calibration's light: (CH0 / t) / (CH0_cal / t_cal) of msgs/io/sunshine_sensor.hpp.
+inline double sequoia_sunshine_reading(const RawBand& b, double light) {
+  return 0.5 * b.sensitivity / 1e7 * light / kSequoiaSunshineCalibrationRate;
+}
+
+/// Xmp.Camera.IrradianceList of band `b` of a capture at `seconds` after midnight: ten readings at
+/// 5 Hz up to the capture, alternately at gain index 1 for 100 ms and gain index 2 for 20 ms. The
+/// first four (more than a second before the capture) read the previous capture's light
+/// `previous`, the last six this capture's `light`, so that a reader that averages the whole list
+/// is off where one that takes the last second is not. The last band's next-to-last reading is
+/// saturated (65535), as a glint would leave it.
+inline std::string sequoia_sunshine_list(const RawBand& b, int band_index, int seconds, double light, double previous,
+                                         const RawAttitude& att) {
+  std::vector<io::SunshineReading> list;
+  for (int j = 0; j < 10; ++j) {
+    io::SunshineReading r;
+    r.time_us = std::uint64_t(seconds - 9 * 3600) * 1000000u - std::uint64_t(9 - j) * 200000u;
+    r.gain_index = std::uint16_t(j % 2 ? 2 : 1);
+    r.integration_ms = std::uint16_t(j % 2 ? 20 : 100);
+    const double rate = 0.5 * b.sensitivity / 1e7 * (j < 4 ? previous : light);  // counts per ms at gain 1
+    const double ch0 = std::round(rate * kSequoiaSunshineGain[r.gain_index] * r.integration_ms);
+    r.ch0 = std::uint16_t(std::clamp(ch0, 1.0, 65534.0));
+    r.ch1 = std::uint16_t(std::clamp(std::round(0.5 * ch0), 1.0, 65534.0));
+    if (band_index == 3 && j == 8) r.ch0 = 65535;
+    constexpr double deg = 180.0 / std::numbers::pi;
+    r.yaw = float(att.yaw * deg);
+    r.pitch = float(att.pitch * deg);
+    r.roll = float(att.roll * deg);
+    list.push_back(r);
+  }
+  return io::sunshine_list_base64(list);
+}
 
 /// The sunlight of capture `capture` relative to the steady sky: 1 + variation x U(-1, 1).
 inline double raw_light(std::uint64_t seed, int capture, double variation) {
@@ -539,10 +594,12 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
         e.iso = 100;
       }
       const double t_first = raw_capture_seconds(first, sum.captures), t_last = raw_capture_seconds(last, sum.captures);
-      const double light =
-          raw_light(opt.seed, ci, opt.light_variation) *
-          (1.0 + opt.light_drift *
-                     (t_last > t_first ? (raw_capture_seconds(ci, sum.captures) - t_first) / (t_last - t_first) : 0.0));
+      const auto light_of = [&](int c) {
+        return raw_light(opt.seed, c, opt.light_variation) *
+               (1.0 + opt.light_drift *
+                          (t_last > t_first ? (raw_capture_seconds(c, sum.captures) - t_first) / (t_last - t_first) : 0.0));
+      };
+      const double light = light_of(ci);
       const RawAttitude att = raw_attitude(ci, panel);
       // What the light sensor adds to the light: a calibration error, and in flight the heading's part.
       const double sensor = (1.0 + opt.dls_bias) *
@@ -664,6 +721,11 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
         for (const auto& ab : e2d) exps.insert(exps.end(), {double(ab[0]), double(ab[1])});
         elems.emplace_back("Camera:VignettingPolynomial2D", detail::rdf_seq(c2d));
         elems.emplace_back("Camera:VignettingPolynomial2DName", detail::rdf_seq(exps));
+        const double previous = ci > first ? light_of(ci - 1) : light;
+        attrs.emplace_back("Camera:IrradianceList",
+                           sequoia_sunshine_list(b, int(bi), raw_capture_seconds(ci, sum.captures), light * sensor,
+                                                 previous * sensor, att));
+        attrs.emplace_back("Camera:IrradianceCalibrationMeasurement", sequoia_sunshine_calibration());
       } else {  // Pix4D's keys (for DJI the same correction again, as the real camera writes it)
         elems.emplace_back("Camera:VignettingCenter", detail::rdf_seq({vcx, vcy}));
         elems.emplace_back("Camera:VignettingPolynomial", detail::rdf_seq(k));
