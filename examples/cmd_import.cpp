@@ -275,9 +275,13 @@ std::string radiometry_formula(const msgs::io::FrameRadiometry& r, bool applied,
   if (!applied) return "value = DN / dn_max (stored values kept: no radiometric metadata)";
   const auto& s = r.steps;
   const std::string response =
-      cat(s.exposure ? " * exposure_s" : "", s.gain ? " * gain" : "", s.vignetting ? " * vignetting(r)" : "",
-          s.row_gradient ? " * (1 + a2 y / exposure_s - a3 y)" : "", s.irradiance ? " * light_sensor" : "");
-  const std::string v = cat("(DN", s.black_level ? " - black_level" : "", ")",
+      cat(s.sensor_model ? " * (A * exposure_s * ISO + C)" : cat(s.exposure ? " * exposure_s" : "", s.gain ? " * gain" : ""),
+          s.vignetting ? " * vignetting(r)" : "", s.row_gradient ? " * (1 + a2 y / exposure_s - a3 y)" : "",
+          s.irradiance ? " * light_sensor" : "");
+  const std::string dark = s.sensor_model ? (s.vignetting ? " - B * vignetting(r)" : " - B")
+                           : s.black_level ? " - black_level"
+                                           : "";
+  const std::string v = cat("(DN", dark, ")",
                             response.empty() ? "" : " / (" + response.substr(3) + ")", " * scale",
                             r.offset != 0.0 ? " - offset" : "");
   switch (calibration) {
@@ -1796,6 +1800,7 @@ int run_import(const std::vector<std::string>& argv) {
       rad["applied"] = it.radiometry_applied;
       const auto& s = it.rad.steps;
       rad["black_level"] = s.black_level ? nlohmann::ordered_json(it.rad.black_level) : nlohmann::ordered_json(nullptr);
+      if (s.sensor_model) rad["sensor_model_a_b_c"] = {it.rad.model_a, it.rad.model_b, it.rad.model_c};
       rad["exposure_s"] = s.exposure ? nlohmann::ordered_json(it.rad.exposure_s) : nlohmann::ordered_json(nullptr);
       rad["gain"] = s.gain ? nlohmann::ordered_json(it.rad.gain) : nlohmann::ordered_json(nullptr);
       rad["vignetting"] = s.vignetting;

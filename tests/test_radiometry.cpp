@@ -216,6 +216,60 @@ TEST_CASE("capture meta: the 2-D vignetting polynomial of Parrot Sequoia and Mic
   CHECK_THROWS_WITH_AS(normalise_image(img, hole, "x.tif"), doctest::Contains("2-D vignetting polynomial is"), IoError);
 }
 
+TEST_CASE("radiometry: the Parrot Sequoia's SensorModel takes the place of the black level and exposure x gain") {
+  // Parrot's irradiance f^2 (DN / V - B) / (A exposure ISO + C), V the 2-D fall-off.
+  const std::string sequoia =
+      "Xmp.Camera.BandName                           NIR\n"
+      "Xmp.Camera.VignettingPolynomial2D             0.7, 0.6, 0.6, -0.6, -0.6\n"
+      "Xmp.Camera.VignettingPolynomial2DName         0, 0, 1, 0, 0, 1, 2, 0, 0, 2\n"
+      "Xmp.Camera.SensorModel                        85000,210.5,170\n"
+      "Exif.Photo.ExposureTime                       1/1000\n"
+      "Exif.Photo.ISOSpeedRatings                    200\n";
+  const CaptureMeta m = parse_capture_meta(sequoia, "IMG_0001_NIR.TIF");
+  REQUIRE(m.sensor_model);
+  CHECK(*m.sensor_model == std::array<double, 3>{85000, 210.5, 170});
+  CHECK(m.source.at("sensor_model") == "Xmp.Camera.SensorModel");
+
+  // Every image with it: the model, and no black level wanted (in any mode).
+  for (const Calibration c : {Calibration::relative, Calibration::panel}) {
+    const BandPlan plan = plan_band({m, m}, {"a.TIF", "b.TIF"}, c);
+    CHECK(plan.missing.empty());
+    CHECK(plan.steps.sensor_model);
+    CHECK(!plan.steps.black_level);
+  }
+  const BandPlan plan = plan_band({m}, {"a.TIF"});
+  FrameRadiometry r = frame_radiometry(m, plan.steps, 65535, 200, 100);
+  r.scale = 1.0;
+  const double response = 85000 * 0.001 * 200 + 170;  // A exposure ISO + C
+  CHECK(exposure_response(r) == doctest::Approx(response));
+  for (const auto& [x, y] : {std::array<double, 2>{100, 50}, std::array<double, 2>{0, 0}, std::array<double, 2>{150, 10}}) {
+    const double V = vignetting_falloff(r, x, y), dn = 12000.0;
+    CHECK(dark_level(r, x, y) == doctest::Approx(210.5 * V));
+    CHECK(relative_radiance(dn, x, y, r) == doctest::Approx((dn / V - 210.5) / response).epsilon(1e-12));
+  }
+  msgs::Image<float> img(200, 100, 1);
+  img.at(0, 0, 0) = float(12000.0 / 65535.0);
+  const auto n = normalise_image(img, r, "x.tif");
+  CHECK(n.at(0, 0, 0) == doctest::Approx((12000.0 / 0.7 - 210.5) / response).epsilon(1e-6));
+  CHECK(n.at(1, 0, 0) == 0.0f);  // DN 0, below the dark level: 0
+
+  // The model in some images only: the others miss it. A model whose response is not positive, or
+  // malformed text, is an error naming the file.
+  CaptureMeta without = m;
+  without.sensor_model.reset();
+  const BandPlan some = plan_band({m, without}, {"a.TIF", "b.TIF"});
+  CHECK(some.missing.at("sensor model (Parrot SensorModel)") == std::vector<std::filesystem::path>{"b.TIF"});
+  CHECK(!some.steps.sensor_model);
+  FrameRadiometry negative = r;
+  negative.model_c = -1e6;
+  CHECK_THROWS_WITH_AS(normalise_image(img, negative, "x.tif"),
+                       doctest::Contains("x.tif: the sensor model's A x exposure x ISO + C is"), IoError);
+  CHECK_THROWS_WITH_AS(parse_capture_meta("Xmp.Camera.SensorModel 1,2\n", "x.tif"),
+                       doctest::Contains("x.tif: field 'Xmp.Camera.SensorModel'"), IoError);
+  CHECK_THROWS_WITH_AS(parse_capture_meta("Xmp.Camera.SensorModel 0,2,3\n", "x.tif"),
+                       doctest::Contains("three numbers A, B, C with A > 0"), IoError);
+}
+
 TEST_CASE("radiometry: MicaSense's row gradient, from RadiometricCalibration") {
   // A RedEdge's a1, a2, a3; row y is recorded 1 + a2 y / exposure - a3 y times as bright.
   const std::string text = std::string(kMicaSense) +

@@ -115,7 +115,7 @@ inline PanelReading read_panel(const Image<float>& raw, const FrameRadiometry& r
     for (int x = ix0; x <= ix1; ++x) {
       if (!inside_quad(area, x, y)) continue;
       const double dn = double(raw.at(x, y, 0)) * r.dn_max;
-      sum += (dn - r.black_level) / sensor_response(r, x, y);
+      sum += (dn - dark_level(r, x, y)) / sensor_response(r, x, y);
       ++p.pixels;
       p.saturated += dn >= kSaturatedShareOfMax * r.dn_max;
     }

@@ -24,6 +24,9 @@
 //                 (Parrot Sequoia, MicaSense RedEdge-P and Altum-PT: the fall-off
 //                 sum_i c_i (x / width)^a_i (y / height)^b_i, the exponents a_0, b_0, a_1, b_1, ...
 //                 in the Name key; the image is divided by it)
+//   sensor model  Xmp.Camera.SensorModel (Parrot Sequoia, firmware 1.2.1 and later: A, B, C of
+//                 irradiance = f^2 (DN / fall-off - B) / (A exposure ISO + C), Parrot's application
+//                 note SEQ-AN-01 as its users quote it; B takes the black level's place)
 //   row gradient  Xmp.MicaSense.RadiometricCalibration (a1, a2, a3: MicaSense's sensor records row y
 //                 brighter by 1 + a2 y / exposure - a3 y; a1 turns the corrected DN / 2^bits into
 //                 radiance in W/m^2/sr/nm, used by --radiometry reflectance only)
@@ -109,6 +112,9 @@ struct CaptureMeta {
   /// is no radial model.
   std::vector<double> vignetting_poly2d;                ///< c_i
   std::vector<std::array<int, 2>> vignetting_exp2d;     ///< (a_i, b_i)
+  /// The Parrot Sequoia's model of its sensor (Xmp.Camera.SensorModel, firmware 1.2.1 and later):
+  /// A, B, C of irradiance = f^2 (DN / fall-off - B) / (A x exposure_s x ISO + C).
+  std::optional<std::array<double, 3>> sensor_model;
   /// MicaSense's a2, a3: DN grows along the row index y by 1 + a2 y / exposure_s - a3 y.
   std::optional<std::array<double, 2>> row_gradient;
   /// MicaSense's a1: radiance (W/m^2/sr/nm) = a1 x (DN - black level) / 2^bits / (exposure x gain
@@ -186,7 +192,7 @@ inline const std::vector<std::string>& exiv2_metadata_keys() {
       "Exif.Photo.DateTimeOriginal", "Exif.Photo.SubSecTimeOriginal", "Xmp.exif.DateTimeOriginal",
       "Exif.Photo.SubSecTime", "Xmp.DLS.DirectIrradiance", "Xmp.DLS.ScatteredIrradiance",
       "Xmp.DLS.SpectralIrradiance", "Xmp.DLS.Yaw", "Xmp.DLS.Pitch", "Xmp.DLS.Roll", "Xmp.drone-dji.FlightYawDegree",
-      "Xmp.Camera.IrradianceList", "Xmp.Camera.IrradianceCalibrationMeasurement"};
+      "Xmp.Camera.IrradianceList", "Xmp.Camera.IrradianceCalibrationMeasurement", "Xmp.Camera.SensorModel"};
   return keys;
 }
 
@@ -678,6 +684,12 @@ inline CaptureMeta capture_meta_from_exiv2(const std::map<std::string, std::stri
         m.vignetting_exp2d.push_back({int((*exps)[2 * i]), int((*exps)[2 * i + 1])});
       m.source["vignetting"] = c->first;
     }
+  }
+  if (auto e = first({"Xmp.Camera.SensorModel"})) {
+    const auto list = detail::parse_number_list(e->second, 3);
+    if (!list || list->size() != 3 || !((*list)[0] > 0)) bad(*e, "three numbers A, B, C with A > 0");
+    m.sensor_model = std::array<double, 3>{(*list)[0], (*list)[1], (*list)[2]};
+    m.source["sensor_model"] = e->first;
   }
   if (auto e = first({"Xmp.MicaSense.RadiometricCalibration"})) {
     const auto list = detail::parse_number_list(e->second, 3);

@@ -8,7 +8,14 @@
 // correction polynomial enters as 1 / p(r)) or the 2-D fall-off sum_i c_i (x/W)^a_i (y/H)^b_i of
 // Parrot Sequoia and MicaSense RedEdge-P / Altum-PT, row(y) = 1 + a2 y / exposure_s - a3 y
 // MicaSense's row gradient (1 for other cameras), and `scale` one common factor per band for the whole
-// capture set, chosen so that the brightest normalised value of the band is 1. Steps whose tags
+// capture set, chosen so that the brightest normalised value of the band is 1. Where a Parrot
+// Sequoia writes its own model of the sensor (SensorModel A, B, C, with its fall-off V), that model
+// takes the place of the black level, exposure and gain:
+//
+//   L(x, y) = (DN - B V(x, y)) / (V(x, y) (A exposure_s ISO + C)) * scale
+//
+// (Parrot's irradiance f^2 (DN / V - B) / (A exposure ISO + C), its fixed f-number in the scale).
+// Steps whose tags
 // are missing for some image of a band are left out for the whole band (mixing corrected and
 // uncorrected images would break the common scale); plan_band says which and why.
 //
@@ -59,7 +66,10 @@ namespace msgs::io {
 struct RadiometrySteps {
   bool black_level = false, exposure = false, gain = false, vignetting = false, row_gradient = false;
   bool irradiance = false;  ///< reflectance: divide by the light sensor's irradiance
-  bool any() const { return black_level || exposure || gain || vignetting || row_gradient || irradiance; }
+  /// The Parrot Sequoia's SensorModel in place of the black level and exposure x gain (with both
+  /// the exposure and gain steps, gain being ISO / 100).
+  bool sensor_model = false;
+  bool any() const { return black_level || exposure || gain || vignetting || row_gradient || irradiance || sensor_model; }
 };
 
 /// The normalisation of one image.
@@ -74,6 +84,7 @@ struct FrameRadiometry {
   std::vector<std::array<int, 2>> vignetting_exp2d;  ///< their exponents of x / width and y / height
   int width = 0, height = 0;  ///< the image's size, which the 2-D model's coordinates are divided by
   double row_a2 = 0.0, row_a3 = 0.0;  ///< MicaSense's row gradient (used when steps.row_gradient)
+  double model_a = 0.0, model_b = 0.0, model_c = 0.0;  ///< the Sequoia's SensorModel (steps.sensor_model)
   double irradiance = 1.0;            ///< the light sensor's reading (used when steps.irradiance)
   double radiance_a1 = 0.0;           ///< MicaSense's a1 (reflectance only)
   double gain_adjustment = 0.0;       ///< DJI's SensorGainAdjustment (sun-sensor only)
@@ -122,12 +133,18 @@ inline BandPlan plan_band(const std::vector<CaptureMeta>& metas, const std::vect
   // The modes that take the light sensor's reading in any unit (sun_sensor has its own branch).
   const bool sun = calibration == Calibration::panel_and_sun_sensor || calibration == Calibration::sun_sensor_relative;
   const bool panel = calibration == Calibration::panel || calibration == Calibration::panel_and_sun_sensor;
+  // The Parrot Sequoia's own model of its sensor, wherever the band's images carry it: every image
+  // must then, with the exposure time and ISO it takes. Its B is the black level.
+  const auto has_model = [](const CaptureMeta& m) { return m.sensor_model.has_value(); };
+  const bool model = std::any_of(metas.begin(), metas.end(), has_model);
   // A camera that writes no black level anywhere (the Parrot Sequoia) has none to subtract, which
   // a panel calibration can live with.
-  if (!panel || std::any_of(metas.begin(), metas.end(), [](const CaptureMeta& m) { return m.black_level.has_value(); }))
+  if (!model &&
+      (!panel || std::any_of(metas.begin(), metas.end(), [](const CaptureMeta& m) { return m.black_level.has_value(); })))
     plan.steps.black_level = check("black level", [](const CaptureMeta& m) { return m.black_level.has_value(); });
   plan.steps.exposure = check("exposure time", [](const CaptureMeta& m) { return m.exposure_s.has_value(); });
   plan.steps.gain = check("gain/ISO", [](const CaptureMeta& m) { return m.gain.has_value(); });
+  if (model) plan.steps.sensor_model = check("sensor model (Parrot SensorModel)", has_model) && plan.steps.exposure && plan.steps.gain;
   plan.steps.vignetting = check("vignetting polynomial+centre", [](const CaptureMeta& m) { return m.has_vignetting(); });
   // MicaSense's row gradient needs the exposure time. Only MicaSense writes it, so a band none of
   // whose images has it is not missing anything.
@@ -185,6 +202,11 @@ inline FrameRadiometry frame_radiometry(const CaptureMeta& m, const RadiometrySt
     r.row_a3 = (*m.row_gradient)[1];
   }
   if (steps.irradiance) r.irradiance = *m.irradiance;
+  if (steps.sensor_model) {
+    r.model_a = (*m.sensor_model)[0];
+    r.model_b = (*m.sensor_model)[1];
+    r.model_c = (*m.sensor_model)[2];
+  }
   if (m.radiance_a1) r.radiance_a1 = *m.radiance_a1;
   if (m.gain_adjustment) r.gain_adjustment = *m.gain_adjustment;
   return r;
@@ -251,17 +273,29 @@ inline double row_gradient_factor(const FrameRadiometry& r, double y) {
   return r.steps.row_gradient ? 1.0 + r.row_a2 * y / r.exposure_s - r.row_a3 * y : 1.0;
 }
 
+/// What the camera's exposure settings make of a unit of light: exposure x gain, or with the
+/// Sequoia's SensorModel A x exposure x ISO + C (ISO = 100 gain).
+inline double exposure_response(const FrameRadiometry& r) {
+  return r.steps.sensor_model ? r.model_a * r.exposure_s * (100.0 * r.gain) + r.model_c : r.exposure_s * r.gain;
+}
+
 /// What the sensor records at pixel (x, y) per unit of relative radiance (of reflectance, with the
-/// irradiance step), above the black level: exposure x gain x vignetting fall-off x row gradient
-/// (x irradiance).
+/// irradiance step), above the black level: exposure x gain (exposure_response) x vignetting
+/// fall-off x row gradient (x irradiance).
 inline double sensor_response(const FrameRadiometry& r, double x, double y) {
-  const double s = r.exposure_s * r.gain * vignetting_falloff(r, x, y) * row_gradient_factor(r, y);
+  const double s = exposure_response(r) * vignetting_falloff(r, x, y) * row_gradient_factor(r, y);
   return r.steps.irradiance ? s * r.irradiance : s;
+}
+
+/// What the sensor records at pixel (x, y) without light: the black level, or the Sequoia's B x its
+/// fall-off (Parrot's model subtracts B from DN / fall-off).
+inline double dark_level(const FrameRadiometry& r, double x, double y) {
+  return r.steps.sensor_model ? r.model_b * vignetting_falloff(r, x, y) : r.black_level;
 }
 
 /// Relative radiance of digital number `dn` at pixel (x, y), before the band scale.
 inline double relative_radiance(double dn, double x, double y, const FrameRadiometry& r) {
-  return (dn - r.black_level) / sensor_response(r, x, y);
+  return (dn - dark_level(r, x, y)) / sensor_response(r, x, y);
 }
 
 /// The largest fall-off factor a vignetting model may give the image's farthest pixel (a lens
@@ -288,7 +322,11 @@ inline void check_radiometry(const FrameRadiometry& r, int width, int height, co
       !std::isfinite(r.exposure_s * r.gain) || !(r.scale > 0) || !std::isfinite(r.scale) || !std::isfinite(r.offset))
     fail(file, cat("radiometric parameters out of range (black level ", r.black_level, ", exposure ", r.exposure_s,
                    " s, gain ", r.gain, ", scale ", r.scale, ", offset ", r.offset, ")"));
-  if (r.steps.irradiance && (!(r.irradiance > 0) || !std::isfinite(r.irradiance * r.exposure_s * r.gain)))
+  if (r.steps.sensor_model && (!(exposure_response(r) > 0) || !std::isfinite(exposure_response(r)) || !std::isfinite(r.model_b)))
+    fail(file, cat("the sensor model's A x exposure x ISO + C is ", exposure_response(r), " (A ", r.model_a, ", B ",
+                   r.model_b, ", C ", r.model_c, ", exposure ", r.exposure_s, " s, ISO ", 100.0 * r.gain,
+                   "; expected > 0; skip the metadata with --radiometry none)"));
+  if (r.steps.irradiance && (!(r.irradiance > 0) || !std::isfinite(r.irradiance * exposure_response(r))))
     fail(file, cat("light sensor reading ", r.irradiance, " out of range (expected > 0;",
                    " --radiometry auto gives relative radiance without it)"));
   // The row gradient is linear in y: positive at the first and last row means positive on all.
@@ -345,10 +383,10 @@ inline Image<float> normalise_image(const Image<float>& raw, const FrameRadiomet
   Image<float> out(raw.width, raw.height, raw.channels);
   for (int y = 0; y < raw.height; ++y)
     for (int x = 0; x < raw.width; ++x) {
-      const double k = r.scale / sensor_response(r, x, y);
+      const double k = r.scale / sensor_response(r, x, y), dark = dark_level(r, x, y);
       for (int c = 0; c < raw.channels; ++c) {
         const double dn = double(raw.at(x, y, c)) * r.dn_max;
-        out.at(x, y, c) = float(std::max(0.0, (dn - r.black_level) * k - r.offset));
+        out.at(x, y, c) = float(std::max(0.0, (dn - dark) * k - r.offset));
       }
     }
   return out;

@@ -39,12 +39,13 @@
 //              P4 Multispectral numbers them; its tags as the Mavic 3M's, but the black level as
 //              drone-dji:BlackLevel (4096).
 //   sequoia    IMG_<yymmdd>_<hhmmss>_0001_GRE.TIF, _RED, _REG, _NIR, and _RGB.JPG. Like the real
-//              camera: no black level (DN = radiance x ...), and the vignetting as a 2-D fall-off
+//              camera: no black level tag, and the vignetting as a 2-D fall-off
 //              polynomial in x / width and y / height (Camera:VignettingPolynomial2D, its exponents
 //              in Camera:VignettingPolynomial2DName); exposure, ISO, wavelengths and focal data as
 //              for MicaSense; the sunshine sensor's readings of the band since the previous capture
 //              and its gains' calibration, Camera:IrradianceList and
-//              Camera:IrradianceCalibrationMeasurement (sequoia_sunshine_list).
+//              Camera:IrradianceCalibrationMeasurement (sequoia_sunshine_list), and the sensor's
+//              model Camera:SensorModel, which the DN follow (sequoia_sensor_model).
 //   All three carry the capture's position (the RGB mount's centre as metres east, north and up
 //   of 51.98 N, 5.66 E, 20 m): DJI as drone-dji:GpsLatitude/GpsLongitude/AbsoluteAltitude, the
 //   others as exif:GPSLatitude/GPSLongitude ("DD,MM.mmmmmmK") and exif:GPSAltitude.
@@ -280,6 +281,14 @@ inline double dji_gain_adjustment(const RawBand& b) {
 /// What DJI's reflectance formula gives for a surface of reflectance 1 in the synthetic DJI sets
 /// (the unknown factor common to all bands in DJI's guides).
 inline constexpr double kDjiReflectanceFactor = 0.01;
+
+/// The SensorModel A, B, C of band `b` of the raw sets' Parrot Sequoia: DN / fall-off - B =
+/// (A exposure ISO + C) x radiance, with A exposure ISO = exposure x ISO / 100 x the band's
+/// sensitivity (as the other cameras' DN), a dark level B of 200 and C = 2e-5 x the sensitivity:
+/// 0.25-4% of the response at the flight's exposures, more at the panel's.
+inline std::array<double, 3> sequoia_sensor_model(const RawBand& b) {
+  return {b.sensitivity / 100.0, 200.0, 2e-5 * b.sensitivity};
+}
 
 /// The gains of the raw sets' Parrot Sequoia sunshine sensor at gain index 0 .. 3 (a real unit's
 /// ratios, rounded), and its counts per millisecond at gain 1 under the factory calibration's light.
@@ -633,6 +642,7 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
                                          albedo)
                 : detail::render_radiance(scene, cam, b.spectrum_channel, rs);
       std::vector<std::uint16_t> dn(L.data.size());
+      const std::array<double, 3> model = sequoia_sensor_model(b);
       const double bl = black ? black_level : 0.0;
       for (int y = 0; y < cam.height; ++y)
         for (int x = 0; x < cam.width; ++x) {
@@ -646,8 +656,10 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
             fall = dji ? 1.0 / (1.0 + p) : 1.0 + p;
           }
           const double row = micasense ? 1.0 + row_a2 * y / e.exposure_s - row_a3 * y : 1.0;
-          const double v = bl + (double(L.at(x, y, 0)) + opt.path_reflectance) * e.exposure_s * e.gain() * fall * row *
-                                    b.sensitivity * light;
+          // The Sequoia as its SensorModel says: DN / fall-off - B = (A exposure ISO + C) x light.
+          const double dark = sequoia ? fall * model[1] : bl;
+          const double camera = sequoia ? model[0] * e.exposure_s * e.iso + model[2] : e.exposure_s * e.gain() * b.sensitivity;
+          const double v = dark + (double(L.at(x, y, 0)) + opt.path_reflectance) * camera * fall * row * light;
           dn[std::size_t(y) * std::size_t(cam.width) + std::size_t(x)] =
               static_cast<std::uint16_t>(std::lround(std::clamp(v, 0.0, 65535.0)));
         }
@@ -726,6 +738,8 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
                            sequoia_sunshine_list(b, int(bi), raw_capture_seconds(ci, sum.captures), light * sensor,
                                                  previous * sensor, att));
         attrs.emplace_back("Camera:IrradianceCalibrationMeasurement", sequoia_sunshine_calibration());
+        attrs.emplace_back("Camera:SensorModel", io::cat(detail::g10(model[0]), ",", detail::g10(model[1]), ",",
+                                                         detail::g10(model[2])));
       } else {  // Pix4D's keys (for DJI the same correction again, as the real camera writes it)
         elems.emplace_back("Camera:VignettingCenter", detail::rdf_seq({vcx, vcy}));
         elems.emplace_back("Camera:VignettingPolynomial", detail::rdf_seq(k));
