@@ -91,6 +91,18 @@ msgs::synth::RawOptions small_micasense_set() {
   return opt;
 }
 
+/// small_micasense_set() as `camera` under sunlight that changes by up to 25% from capture to
+/// capture, with a light sensor that reads 10% high, and one capture of a calibration panel after
+/// the flight.
+msgs::synth::RawOptions changing_light_set(const std::string& camera) {
+  msgs::synth::RawOptions opt = small_micasense_set();
+  opt.camera = camera;
+  opt.light_variation = 0.25;
+  opt.dls_bias = 0.1;
+  opt.panel_captures = 1;
+  return opt;
+}
+
 /// The scene preset a raw set of `opt` renders (for its ground truth), as write_synthetic_raw
 /// sizes it.
 msgs::synth::SynthPreset raw_set_preset(const msgs::synth::RawOptions& opt) {
@@ -776,10 +788,7 @@ TEST_CASE("msgs import --radiometry reflectance: a DLS 1's tilted readings are l
 TEST_CASE("msgs import --radiometry panel, panel+dls: the panel capture is set aside and sets the reflectance's level") {
   // Sunlight that changes by up to 25%, a light sensor that reads 10% high, and one capture of a
   // calibration panel after the flight (IMG_0006).
-  msgs::synth::RawOptions opt = small_micasense_set();
-  opt.light_variation = 0.25;
-  opt.dls_bias = 0.1;
-  opt.panel_captures = 1;
+  const msgs::synth::RawOptions opt = changing_light_set("micasense");
   const auto dir_or = truth_case("panel", "reflectance from a calibration panel", opt);
   if (!dir_or) return;
   const fs::path& dir = *dir_or;
@@ -1037,12 +1046,8 @@ TEST_CASE("msgs import: a DJI flight's sunlight sensor, with the panel pictures 
   // A Mavic 3M marks no panel pictures: the panel capture after the flight (0007) is listed with
   // its areas in panels.json. The light changes by up to 25% from capture to capture, and the
   // sunlight sensor reads 10% high.
-  msgs::synth::RawOptions opt = small_micasense_set();
-  opt.camera = "dji";
+  msgs::synth::RawOptions opt = changing_light_set("dji");
   opt.captures = 6;
-  opt.panel_captures = 1;
-  opt.light_variation = 0.25;
-  opt.dls_bias = 0.1;
   const auto dir_or = colmap_case("panels", "DJI's sunlight sensor and calibration panels listed by hand", opt);
   if (!dir_or) return;
   const fs::path& dir = *dir_or;
@@ -1151,11 +1156,7 @@ TEST_CASE("msgs import: a DJI flight's sunlight sensor, with the panel pictures 
 TEST_CASE("msgs import --radiometry panel+dls: a Parrot Sequoia's sunshine sensor follows the light") {
   // Sunlight that changes by up to 25% from capture to capture, a sunshine sensor that reads 10%
   // high, and a panel capture after the flight, listed in panels.json (a Sequoia marks none).
-  msgs::synth::RawOptions opt = small_micasense_set();
-  opt.camera = "sequoia";
-  opt.light_variation = 0.25;
-  opt.dls_bias = 0.1;
-  opt.panel_captures = 1;
+  const msgs::synth::RawOptions opt = changing_light_set("sequoia");
   const auto dir_or = truth_case("sequoia_sun", "a Sequoia's sunshine sensor", opt);
   if (!dir_or) return;
   const fs::path& dir = *dir_or;
