@@ -177,7 +177,7 @@ inline HeadingFit fit_heading_bias(const std::vector<double>& reading, const std
   fit.lines = m;
   if (spread < kMinHeadingSpreadDeg) {
     fit.problem = cat("the headings flown lie within ", short_number(spread, 3), " degrees (the check takes ",
-                      kMinHeadingSpreadDeg, ")");
+                      short_number(kMinHeadingSpreadDeg), ")");
     return fit;
   }
   if (m < kMinHeadingLines) {
