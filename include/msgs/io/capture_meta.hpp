@@ -563,6 +563,11 @@ inline void read_sunshine_sensor(const std::pair<const std::string, std::string>
   m.source["irradiance"] = list.first;
 }
 
+/// The exposure time legacy MicaSense RedEdge firmware writes for some frames, and what they were
+/// exposed (MicaSense's imageprocessing library, micasense/metadata.py).
+inline constexpr double kRedEdgeWrongExposureS = 1.0 / 6329.0;
+inline constexpr double kRedEdgeTrueExposureS = 0.000274;
+
 /// Turn the key -> value map of one file into metadata. `file` names the image in errors.
 /// Throws IoError for a recognised key whose value is malformed (not a number where one is
 /// expected, a vignetting centre without two numbers, a non-positive exposure ...).
@@ -630,6 +635,14 @@ inline CaptureMeta capture_meta_from_exiv2(const std::map<std::string, std::stri
   const auto make = first({"Exif.Image.Make"});
   const bool dji = (make && detail::trim(make->second).substr(0, 3) == "DJI") ||
                    std::any_of(kv.begin(), kv.end(), [](const auto& e) { return e.first.rfind("Xmp.drone-dji.", 0) == 0; });
+  // Legacy RedEdge firmware (v2.1.2 among them) writes 1/6329 s for frames it exposed 0.274 ms;
+  // MicaSense's library reads that value so for every camera of theirs but the Altum.
+  const auto model = first({"Exif.Image.Model"});
+  if (m.exposure_s && make && detail::trim(make->second) == "MicaSense" &&
+      !(model && detail::trim(model->second) == "Altum") && std::abs(*m.exposure_s - kRedEdgeWrongExposureS) < 1e-6) {
+    m.exposure_s = kRedEdgeTrueExposureS;
+    m.source["exposure_s"] += " (1/6329 s: legacy RedEdge firmware's value for 0.274 ms, as MicaSense's library reads it)";
+  }
   auto read_vignetting = [&](const char* poly_key, std::initializer_list<const char*> centre_keys, VignettingKind kind) {
     const auto p = first({poly_key});
     if (!p) return false;
@@ -708,7 +721,6 @@ inline CaptureMeta capture_meta_from_exiv2(const std::map<std::string, std::stri
     double scale = 0.01;
     if (auto sc = first({"Xmp.Camera.IrradianceScaleToSIUnits"})) scale = number(*sc, "a scale factor (> 0)", true);
     // MicaSense's library distrusts HorizontalIrradiance from these firmware versions.
-    const auto model = first({"Exif.Image.Model"});
     const std::string_view name = model ? detail::trim(model->second) : std::string_view();
     const std::vector<int> fixed = name == "RedEdge" || name == "RedEdge-M" ? std::vector<int>{5, 1, 7}
                                    : name == "Altum"                          ? std::vector<int>{1, 2, 3}
