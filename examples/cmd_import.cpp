@@ -1757,6 +1757,7 @@ int run_import(const std::vector<std::string>& argv) {
   tf["msgs_import"] = meta_json;
   nlohmann::ordered_json frames = nlohmann::ordered_json::array();
   std::vector<std::string> train, eval;
+  std::map<std::string, std::size_t> train_frames;  // per band: msgs train needs at least one
   std::size_t n_frames = 0;
   for (const Item& it : items) {
     const auto reg = registered.find(it.colmap_name);
@@ -1835,6 +1836,7 @@ int run_import(const std::vector<std::string>& argv) {
     frames.push_back(f);
     const bool ev = eval_every > 0 && it.capture % static_cast<std::size_t>(eval_every) == 0;
     (ev ? eval : train).push_back("images/" + it.out_name);
+    train_frames[it.band] += ev ? 0 : 1;
     ++n_frames;
   }
   tf["frames"] = frames;
@@ -1862,6 +1864,14 @@ int run_import(const std::vector<std::string>& argv) {
   if (args.flag("keep-work")) std::printf("  work folder kept: %s\n", work.string().c_str());
 
   std::printf("wrote %s\n", out.string().c_str());
+  // A band whose every frame went to eval cannot be trained: say so now, not at `msgs train`.
+  std::string untrained;
+  for (const auto& [band, n] : train_frames)
+    if (n == 0) untrained += cat(untrained.empty() ? "" : ", ", band);
+  if (!untrained.empty())
+    std::printf("  warning: no training frame of %s: --eval-every %ld put all of its captures in eval, and msgs train "
+                "needs training frames (--eval-every 0 keeps every capture for training)\n",
+                untrained.c_str(), eval_every);
   if (given) {
     std::printf("  frames: %zu (%zu train, %zu eval), posed as in %s; sparse_pc.ply copied from there\n", n_frames,
                 train.size(), eval.size(), given->root.string().c_str());

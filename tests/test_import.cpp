@@ -581,6 +581,13 @@ TEST_CASE("msgs import --poses-from: the poses of another import, checked agains
   const auto second = import_raw(dir, "second", "--radiometry auto" + from("first"));
   REQUIRE_MESSAGE(second.first == 0, second.second);
   check_poses_from(dir / "second", dir / "first");
+  CHECK(second.second.find("no training frame") == std::string::npos);
+  // Every capture in eval: the import says which bands msgs train could not train, and how not to.
+  const auto all_eval = import_raw(dir, "all_eval", "--radiometry none --eval-every 1" + from("truth"));
+  REQUIRE_MESSAGE(all_eval.first == 0, all_eval.second);
+  CHECK_MESSAGE(all_eval.second.find("warning: no training frame of MS_G, MS_NIR, MS_R, MS_RE: --eval-every 1 put all "
+                                     "of its captures in eval") != std::string::npos,
+                all_eval.second);
   // In place (--force): the radiometry redone, the poses as they were.
   const auto in_place = import_raw(dir, "first", "--radiometry auto --force" + from("first"));
   REQUIRE_MESSAGE(in_place.first == 0, in_place.second);
