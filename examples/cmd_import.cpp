@@ -91,7 +91,8 @@ constexpr const char* kUsage =
     "     Captures marked as pictures of a calibration panel (Camera:CalibrationPicture) are set\n"
     "     aside in every mode: they are not part of the scene.\n"
     "  3. Poses with COLMAP on the CPU (feature_extractor with one camera per band and the focal\n"
-    "     length from the metadata as prior; matching of every pair, of nearby captures by GPS or\n"
+    "     length, and the principal point where the camera writes its calibration, from the\n"
+    "     metadata as priors; matching of every pair, of nearby captures by GPS or\n"
     "     of a window of captures; mapper) on contrast-stretched 8-bit copies; the largest model\n"
     "     is the main one. Every image must register or be posed by steps 4 and 5 (else an error\n"
     "     names the ones that did not).\n"
@@ -1593,21 +1594,44 @@ int run_import(const std::vector<std::string>& argv) {
       std::vector<std::string> a = {"--database_path", db, "--image_path", (work / "images").string(), "--image_list_path",
                                     list.string(), "--ImageReader.single_camera", "1", "--ImageReader.camera_model", model,
                                     "--SiftExtraction.use_gpu", "0", "--SiftExtraction.peak_threshold", peak};
-      // Focal length prior from the metadata: median over the band's images of mm x pixels/mm.
-      std::vector<double> f;
-      for (std::size_t i : idx)
+      // Focal length prior from the metadata: median over the band's images of the camera's
+      // calibration, or else of mm x pixels/mm. The principal point from the calibration where every
+      // image has one (COLMAP keeps it as given), else the image's centre.
+      std::vector<double> f, px, py;
+      for (std::size_t i : idx) {
         if (auto fp = items[i].meta.focal_px()) f.push_back(*fp);
+        if (const auto& pp = items[i].meta.principal_point_px) {
+          px.push_back((*pp)[0]);
+          py.push_back((*pp)[1]);
+        }
+      }
+      const auto median = [](std::vector<double> v) {
+        std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(v.size() / 2), v.end());
+        return v[v.size() / 2];
+      };
       const Item& first = items[idx.front()];
       if (f.size() == idx.size()) {
-        std::nth_element(f.begin(), f.begin() + std::ptrdiff_t(f.size() / 2), f.end());
-        const double fpx = f[f.size() / 2], cx = first.width / 2.0, cy = first.height / 2.0;
+        // A principal point outside the image is not a calibration of this image size.
+        bool calibrated = px.size() == idx.size();
+        if (calibrated && !(median(px) > 0 && median(px) < first.width && median(py) > 0 && median(py) < first.height)) {
+          std::printf("  %s: note: the principal point the camera writes, (%s, %s), lies outside the %dx%d image; "
+                      "COLMAP starts from its centre\n",
+                      band.c_str(), msgs::io::short_number(median(px), 5).c_str(),
+                      msgs::io::short_number(median(py), 5).c_str(), first.width, first.height);
+          calibrated = false;
+        }
+        const double fpx = median(f), cx = calibrated ? median(px) : first.width / 2.0,
+                     cy = calibrated ? median(py) : first.height / 2.0;
         std::string p = model == "PINHOLE" ? cat(fpx, ",", fpx, ",", cx, ",", cy)
                         : model == "OPENCV" ? cat(fpx, ",", fpx, ",", cx, ",", cy, ",0,0,0,0")
                         : model == "SIMPLE_RADIAL" ? cat(fpx, ",", cx, ",", cy, ",0")
                                                    : cat(fpx, ",", cx, ",", cy, ",0,0");
         a.push_back("--ImageReader.camera_params");
         a.push_back(p);
-        std::printf("  %s: focal length prior %.1f px from the metadata\n", band.c_str(), fpx);
+        std::printf("  %s: focal length prior %.1f px from the metadata%s\n", band.c_str(), fpx,
+                    calibrated ? cat(", principal point (", msgs::io::short_number(cx, 5), ", ", msgs::io::short_number(cy, 5),
+                                     ") from the camera's calibration").c_str()
+                               : "");
       } else {
         std::printf("  %s: no focal length + focal-plane resolution in the metadata; COLMAP guesses the focal length\n",
                     band.c_str());

@@ -373,7 +373,15 @@ TEST_CASE("synth --raw: deterministic bytes, camera file names, metadata exiv2 r
   REQUIRE(m.row_gradient.has_value());
   CHECK((*m.row_gradient)[0] == doctest::Approx(1.39479e-07 * 960 / 24));  // a2, scaled to 24 rows
   CHECK(*m.bits_per_sample == 16);
-  CHECK(m.focal_px().has_value());
+  // The band camera's calibration: the red camera's true focal length and principal point, where
+  // the nominal 5.5 mm is 0.8% off.
+  const msgs::Camera<float> red = msgs::synth::rig_intrinsics(msgs::synth::Band::MS_R, raw_set_preset(opt));
+  REQUIRE(m.principal_point_px.has_value());
+  REQUIRE(m.calibrated_focal_px.has_value());
+  CHECK(*m.focal_px() == doctest::Approx(red.fx).epsilon(1e-6));
+  CHECK((*m.principal_point_px)[0] == doctest::Approx(red.cx).epsilon(1e-6));
+  CHECK((*m.principal_point_px)[1] == doctest::Approx(red.cy).epsilon(1e-6));
+  CHECK(std::abs(*m.focal_length_mm * *m.focal_plane_px_per_mm / red.fx - 1) > 0.005);
   // The capture's position: the RGB mount's camera centre, metres east/north/up of 51.98 N, 5.66 E, 20 m.
   REQUIRE(m.gps.has_value());
   const msgs::synth::SynthScene scene = [&] {

@@ -142,6 +142,38 @@ TEST_CASE("a real RedEdge DLS 1 reading: msgs levels it for the sun as MicaSense
   }
 }
 
+TEST_CASE("real RedEdge files: the band camera's calibrated focal length and principal point, as MicaSense's library reads them") {
+  // Firmware v2.1.2 writes the focal length in pixels; MicaSense's library makes the camera matrix
+  // [[1449.4, 0, 627.6], [0, 1449.4, 479.9]] of IMG_0000_1 (its tests/test_image.py).
+  const CaptureMeta v2 = parse_capture_meta(tags(1), "IMG_0000_1.tif");
+  REQUIRE(v2.calibrated_focal_px.has_value());
+  REQUIRE(v2.principal_point_px.has_value());
+  CHECK(std::abs(*v2.focal_px() - 1449.4) < 0.1);
+  CHECK(std::abs((*v2.principal_point_px)[0] - 627.6) < 0.1);
+  CHECK(std::abs((*v2.principal_point_px)[1] - 479.9) < 0.1);
+  // The nominal 5.5 mm would be 1466.7 pixels, 1.2% long.
+  CHECK(*v2.focal_length_mm * *v2.focal_plane_px_per_mm == doctest::Approx(1466.67).epsilon(1e-4));
+  // A RedEdge-M with firmware v3.3.0 (IMG_0002_4 of the set 0001SET) writes it in mm: MicaSense's
+  // library reads 5.45221099 mm, 266.666667 pixels per mm.
+  const CaptureMeta v3 = parse_capture_meta(read_text(kData / "IMG_0002_4.tags.txt"), "IMG_0002_4.tif");
+  REQUIRE(v3.calibrated_focal_px.has_value());
+  CHECK(*v3.calibrated_focal_px == doctest::Approx(5.45221099 * 266.666667).epsilon(1e-7));
+  CHECK(*v3.exposure_s == doctest::Approx(0.00171).epsilon(1e-12));
+  // Units other than mm or px are an error naming the key; without the focal plane's resolution a
+  // length in mm, or a principal point, is left out.
+  std::string cm = read_text(kData / "IMG_0002_4.tags.txt");
+  cm.replace(cm.find("PerspectiveFocalLengthUnits        mm"), 37, "PerspectiveFocalLengthUnits        cm");
+  CHECK_THROWS_WITH_AS(parse_capture_meta(cm, "a.tif"), doctest::Contains("a.tif: field 'Xmp.Camera.PerspectiveFocalLengthUnits'"),
+                       IoError);
+  std::string no_plane = read_text(kData / "IMG_0002_4.tags.txt");
+  no_plane.erase(no_plane.find("Exif.Photo.FocalPlaneXResolution"),
+                 no_plane.find('\n', no_plane.find("Exif.Photo.FocalPlaneXResolution")) -
+                     no_plane.find("Exif.Photo.FocalPlaneXResolution") + 1);
+  const CaptureMeta without = parse_capture_meta(no_plane, "a.tif");
+  CHECK(!without.calibrated_focal_px);
+  CHECK(!without.principal_point_px);
+}
+
 TEST_CASE("a real RedEdge file whose firmware wrote a wrong exposure time: msgs reads it as MicaSense's library does") {
   // IMG_0003_1 of MicaSense's set 0001SET (firmware v2.1.2) says 158/1000000 s, the 1/6329 s that
   // legacy RedEdge firmware writes for frames exposed 0.274 ms.

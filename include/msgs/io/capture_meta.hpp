@@ -148,6 +148,11 @@ struct CaptureMeta {
   std::string panel_serial;
   std::optional<double> focal_length_mm;
   std::optional<double> focal_plane_px_per_mm;  ///< x resolution, converted to pixels per mm
+  /// The band camera's own calibration, where it writes one (MicaSense: Pix4D's
+  /// `Camera:PerspectiveFocalLength`, in pixels or in `PerspectiveFocalLengthUnits`, and
+  /// `Camera:PrincipalPoint` in mm on the focal plane), in pixels of the image as stored.
+  std::optional<double> calibrated_focal_px;
+  std::optional<std::array<double, 2>> principal_point_px;
   std::optional<int> bits_per_sample;
   /// Where the camera was: latitude and longitude in degrees (north and east positive) and
   /// altitude in metres (0 when the file gives none). Unset when the file has no position or an
@@ -160,8 +165,10 @@ struct CaptureMeta {
   std::string time_problem;
   std::map<std::string, std::string> source;    ///< quantity -> exiv2 key it was read from
 
-  /// Focal length in pixels (focal length x focal-plane resolution), when both are known.
+  /// Focal length in pixels: the camera's calibration where it writes one, else the nominal focal
+  /// length x focal-plane resolution, when both are known.
   std::optional<double> focal_px() const {
+    if (calibrated_focal_px) return calibrated_focal_px;
     if (focal_length_mm && focal_plane_px_per_mm) return *focal_length_mm * *focal_plane_px_per_mm;
     return std::nullopt;
   }
@@ -192,7 +199,8 @@ inline const std::vector<std::string>& exiv2_metadata_keys() {
       "Exif.Photo.DateTimeOriginal", "Exif.Photo.SubSecTimeOriginal", "Xmp.exif.DateTimeOriginal",
       "Exif.Photo.SubSecTime", "Xmp.DLS.DirectIrradiance", "Xmp.DLS.ScatteredIrradiance",
       "Xmp.DLS.SpectralIrradiance", "Xmp.DLS.Yaw", "Xmp.DLS.Pitch", "Xmp.DLS.Roll", "Xmp.drone-dji.FlightYawDegree",
-      "Xmp.Camera.IrradianceList", "Xmp.Camera.IrradianceCalibrationMeasurement", "Xmp.Camera.SensorModel"};
+      "Xmp.Camera.IrradianceList", "Xmp.Camera.IrradianceCalibrationMeasurement", "Xmp.Camera.SensorModel",
+      "Xmp.Camera.PerspectiveFocalLength", "Xmp.Camera.PerspectiveFocalLengthUnits", "Xmp.Camera.PrincipalPoint"};
   return keys;
 }
 
@@ -792,6 +800,29 @@ inline CaptureMeta capture_meta_from_exiv2(const std::map<std::string, std::stri
     const double mm_per_unit = unit == 2 ? 25.4 : unit == 3 ? 10.0 : unit == 4 ? 1.0 : 0.001;
     m.focal_plane_px_per_mm = res / mm_per_unit;
     m.source["focal_plane_px_per_mm"] = e->first;
+  }
+  if (auto e = first({"Xmp.Camera.PerspectiveFocalLength"})) {
+    const double f = number(*e, "a focal length (> 0)", true);
+    const auto units = first({"Xmp.Camera.PerspectiveFocalLengthUnits"});
+    const std::string_view u = units ? detail::trim(units->second) : std::string_view("px");
+    if (u != "mm" && u != "px") bad(*units, "'mm' or 'px'");
+    // In mm it needs the focal plane's resolution; without one it is not used.
+    if (u == "px" || m.focal_plane_px_per_mm) {
+      m.calibrated_focal_px = u == "px" ? f : f * *m.focal_plane_px_per_mm;
+      if (!std::isfinite(*m.calibrated_focal_px)) bad(*e, "a focal length of a finite number of pixels");
+      m.source["calibrated_focal_px"] = e->first;
+    }
+  }
+  if (auto e = first({"Xmp.Camera.PrincipalPoint"})) {
+    const auto list = detail::parse_number_list(e->second, 2);
+    if (!list || list->size() != 2 || !((*list)[0] > 0) || !((*list)[1] > 0))
+      bad(*e, "x,y of the principal point in mm on the focal plane (two numbers > 0)");
+    if (m.focal_plane_px_per_mm) {
+      m.principal_point_px = {(*list)[0] * *m.focal_plane_px_per_mm, (*list)[1] * *m.focal_plane_px_per_mm};
+      if (!std::isfinite((*m.principal_point_px)[0]) || !std::isfinite((*m.principal_point_px)[1]))
+        bad(*e, "a principal point a finite number of pixels from the corner");
+      m.source["principal_point_px"] = e->first;
+    }
   }
   if (auto e = first({"Exif.Image.BitsPerSample"})) {
     const double b = number(*e, "a bit depth (1..32)", true);

@@ -20,7 +20,9 @@
 //              DLS:SpectralIrradiance, with Camera:Irradiance and
 //              Camera:IrradianceYaw/Pitch/Roll in degrees as the real camera repeats them),
 //              exif:ExposureTime, exif:ISOSpeedRatings, exif:FocalLength, exif:DateTimeOriginal,
-//              exif:FocalPlaneXResolution/YResolution/ResolutionUnit (4 = mm). Real MicaSense files
+//              exif:FocalPlaneXResolution/YResolution/ResolutionUnit (4 = mm), and the band
+//              camera's calibration: Camera:PerspectiveFocalLength (pixels) and Camera:PrincipalPoint
+//              (mm on the focal plane), its true focal length and principal point. Real MicaSense files
 //              keep exposure, ISO, focal length and black level in EXIF IFDs instead; the importer
 //              reads both places.
 //   dji        DJI_<datetime>_0001_MS_G.TIF, _MS_R, _MS_RE, _MS_NIR, and _D.JPG (8-bit sRGB), as a
@@ -743,6 +745,11 @@ inline RawSummary write_synthetic_raw(const std::filesystem::path& out_arg, cons
       } else {  // Pix4D's keys (for DJI the same correction again, as the real camera writes it)
         elems.emplace_back("Camera:VignettingCenter", detail::rdf_seq({vcx, vcy}));
         elems.emplace_back("Camera:VignettingPolynomial", detail::rdf_seq(k));
+      }
+      if (micasense) {  // the band camera's own calibration, where the nominal lens data is ~1% off
+        attrs.emplace_back("Camera:PerspectiveFocalLength", detail::g10(cam.fx));
+        attrs.emplace_back("Camera:PrincipalPoint",
+                           io::cat(detail::g10(cam.cx / px_per_mm), ",", detail::g10(cam.cy / px_per_mm)));
       }
       detail::write_raw_tiff(file, cam.width, cam.height, dn, detail::xmp_packet(attrs, elems));
       ++sum.files;
