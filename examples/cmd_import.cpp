@@ -1611,17 +1611,23 @@ int run_import(const std::vector<std::string>& argv) {
       };
       const Item& first = items[idx.front()];
       if (f.size() == idx.size()) {
-        // A principal point outside the image is not a calibration of this image size.
+        const double fpx = median(f);
+        double cx = first.width / 2.0, cy = first.height / 2.0;
         bool calibrated = px.size() == idx.size();
-        if (calibrated && !(median(px) > 0 && median(px) < first.width && median(py) > 0 && median(py) < first.height)) {
-          std::printf("  %s: note: the principal point the camera writes, (%s, %s), lies outside the %dx%d image; "
-                      "COLMAP starts from its centre\n",
-                      band.c_str(), msgs::io::short_number(median(px), 5).c_str(),
-                      msgs::io::short_number(median(py), 5).c_str(), first.width, first.height);
-          calibrated = false;
+        if (calibrated) {
+          const double mx = median(px), my = median(py);
+          // A principal point outside the image is not a calibration of this image size.
+          calibrated = mx > 0 && mx < first.width && my > 0 && my < first.height;
+          if (calibrated) {
+            cx = mx;
+            cy = my;
+          } else {
+            std::printf("  %s: note: the principal point the camera writes, (%s, %s), lies outside the %dx%d image; "
+                        "COLMAP starts from its centre\n",
+                        band.c_str(), msgs::io::short_number(mx, 5).c_str(), msgs::io::short_number(my, 5).c_str(),
+                        first.width, first.height);
+          }
         }
-        const double fpx = median(f), cx = calibrated ? median(px) : first.width / 2.0,
-                     cy = calibrated ? median(py) : first.height / 2.0;
         std::string p = model == "PINHOLE" ? cat(fpx, ",", fpx, ",", cx, ",", cy)
                         : model == "OPENCV" ? cat(fpx, ",", fpx, ",", cx, ",", cy, ",0,0,0,0")
                         : model == "SIMPLE_RADIAL" ? cat(fpx, ",", cx, ",", cy, ",0")

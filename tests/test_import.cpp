@@ -590,6 +590,20 @@ TEST_CASE("msgs import --poses-from: the poses of another import, checked agains
   REQUIRE_MESSAGE(second.first == 0, second.second);
   check_poses_from(dir / "second", dir / "first");
   CHECK(second.second.find("no training frame") == std::string::npos);
+  // A principal point outside the image (a calibration of another image size) is not COLMAP's
+  // prior: the import says so and starts from the centre. (`--colmap false` stops it there.)
+  fs::copy(dir / "raw", dir / "raw_pp", fs::copy_options::recursive);
+  for (const auto& e : fs::directory_iterator(dir / "raw_pp"))
+    REQUIRE(run("exiv2 -M'reg Camera http://pix4d.com/camera/1.0/' -M'set Xmp.Camera.PrincipalPoint 100,100' '" +
+                    e.path().string() + "'",
+                dir / "exiv2_pp.log") == 0);
+  REQUIRE(run(std::string(MSGS_BIN) + " import --colmap false --radiometry none --images '" + (dir / "raw_pp").string() +
+                  "' --out '" + (dir / "pp").string() + "'",
+              dir / "pp.log") != 0);
+  CHECK_MESSAGE(slurp(dir / "pp.log").find("MS_G: note: the principal point the camera writes, (") != std::string::npos,
+                slurp(dir / "pp.log"));
+  CHECK(slurp(dir / "pp.log").find("lies outside the 48x36 image; COLMAP starts from its centre") != std::string::npos);
+  CHECK(!fs::exists(dir / "pp"));
   // Every capture in eval: the import says which bands msgs train could not train, and how not to.
   const auto all_eval = import_raw(dir, "all_eval", "--radiometry none --eval-every 1" + from("truth"));
   REQUIRE_MESSAGE(all_eval.first == 0, all_eval.second);
@@ -686,6 +700,17 @@ TEST_CASE("msgs import: synthetic MicaSense captures through exiv2 + COLMAP") {
   CHECK(tf["msgs_import"]["registered"] == 20);
   CHECK(tf["msgs_import"]["colmap_ba_global_function_tolerance"] == 1e-6);
   CHECK(tf["msgs_import"]["colmap_sift_peak_threshold"] == doctest::Approx(0.02 / 3));
+  // The band cameras' calibration reached COLMAP, which keeps the principal point it is given: the
+  // true one, up to 1.4% of the image's size from its centre.
+  CHECK(log.find("from the metadata, principal point (") != std::string::npos);
+  for (const auto& f : tf["frames"])
+    for (const msgs::synth::Band b : {msgs::synth::Band::MS_G, msgs::synth::Band::MS_R, msgs::synth::Band::MS_RE,
+                                      msgs::synth::Band::MS_NIR})
+      if (f["mm_channel"] == std::string(msgs::synth::band_name(b))) {
+        const msgs::Camera<float> truth = msgs::synth::rig_intrinsics(b, raw_set_preset(opt));
+        CHECK(f["cx"].get<double>() == doctest::Approx(truth.cx).epsilon(1e-4));
+        CHECK(f["cy"].get<double>() == doctest::Approx(truth.cy).epsilon(1e-4));
+      }
 
   // Exposure differences removed: against the ground-truth radiance of the same pixels, the
   // normalised values of a band have one ratio in every capture, the raw DNs do not.
