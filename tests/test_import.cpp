@@ -600,9 +600,9 @@ TEST_CASE("msgs import --poses-from: the poses of another import, checked agains
   REQUIRE(run(std::string(MSGS_BIN) + " import --colmap false --radiometry none --images '" + (dir / "raw_pp").string() +
                   "' --out '" + (dir / "pp").string() + "'",
               dir / "pp.log") != 0);
-  CHECK_MESSAGE(slurp(dir / "pp.log").find("MS_G: note: the principal point the camera writes, (") != std::string::npos,
-                slurp(dir / "pp.log"));
-  CHECK(slurp(dir / "pp.log").find("lies outside the 48x36 image; COLMAP starts from its centre") != std::string::npos);
+  const std::string pp_log = slurp(dir / "pp.log");
+  CHECK_MESSAGE(pp_log.find("MS_G: note: the principal point the camera writes, (") != std::string::npos, pp_log);
+  CHECK(pp_log.find("lies outside the 48x36 image; COLMAP starts from its centre") != std::string::npos);
   CHECK(!fs::exists(dir / "pp"));
   // Every capture in eval: the import says which bands msgs train could not train, and how not to.
   const auto all_eval = import_raw(dir, "all_eval", "--radiometry none --eval-every 1" + from("truth"));
