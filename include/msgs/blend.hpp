@@ -219,10 +219,14 @@ inline constexpr auto kSetBits = [] {
 /// portable form, by a table per byte; append_set_bits uses AVX-512's compress where it can.
 inline int append_set_bits_by_table(std::uint32_t bits, std::uint8_t tag, std::uint8_t* out, std::uint8_t* tags) {
   const std::uint32_t lo = bits & 0xffu, hi = bits >> 8 & 0xffu;
-  std::uint8_t upper[8];
-  for (int i = 0; i < 8; ++i) upper[i] = std::uint8_t(kSetBits[hi][std::size_t(i)] + 8);
+  // The upper byte's indices plus 8, all eight in one 64-bit addition: no byte exceeds 7 + 8, so
+  // none carries into the next, whatever the byte order. (Added byte by byte, the word was
+  // assembled by GCC 12 from eight byte stores and masks per splat.)
+  std::uint64_t upper;
+  std::memcpy(&upper, kSetBits[hi].data(), 8);
+  upper += 0x0808080808080808ull;
   std::memcpy(out, kSetBits[lo].data(), 8);
-  std::memcpy(out + std::popcount(lo), upper, 8);
+  std::memcpy(out + std::popcount(lo), &upper, 8);
   std::memset(tags, tag, 16);
   return std::popcount(lo) + std::popcount(hi);
 }
